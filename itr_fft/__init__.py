@@ -1,0 +1,1 @@
+"""itr_fft package."""

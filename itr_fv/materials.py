@@ -1,0 +1,164 @@
+"""Phase conductivities and interface resistances (the material side of the discrete model)."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+
+__all__ = ["Materials"]
+
+
+def _check_name(name: object, argument: str) -> str:
+    if not isinstance(name, str) or not name:
+        raise ValueError(f"{argument}: phase names must be non-empty strings, got {name!r}")
+    return name
+
+
+class Materials:
+    """Conductivity of every phase and resistance of every interface type.
+
+    Parameters
+    ----------
+    conductivity : mapping of str to float
+        Thermal conductivity of each phase, W/(m K); finite and > 0.
+    resistance : mapping of (str, str) to float
+        Interfacial thermal resistance (Kapitza resistance) per unordered pair of phase
+        names, m^2 K/W; >= 0, ``math.inf`` for an insulating interface. A pair of two
+        different phases is the particle-matrix (or particle-particle of two fillers)
+        interface; a same-name pair ``(A, A)`` is the contact resistance between two
+        *different* particles of phase A. Faces inside one particle or inside the matrix
+        carry no resistance.
+    matrix : str
+        Name of the matrix (continuous) phase; must be a key of ``conductivity``.
+
+    Examples
+    --------
+    >>> mat = Materials(conductivity={"silicone": 0.18, "Al2O3": 30.0},
+    ...                 resistance={("Al2O3", "silicone"): 2.2e-8, ("Al2O3", "Al2O3"): 2e-7},
+    ...                 matrix="silicone")
+    >>> mat.resistance_between("silicone", "Al2O3")
+    2.2e-08
+    """
+
+    def __init__(
+        self,
+        conductivity: Mapping[str, float],
+        resistance: Mapping[tuple[str, str], float] | None = None,
+        matrix: str = "matrix",
+    ) -> None:
+        if not isinstance(conductivity, Mapping) or len(conductivity) == 0:
+            raise ValueError("conductivity: expected a non-empty mapping {phase name: W/(m K)}")
+        k: dict[str, float] = {}
+        for name, value in conductivity.items():
+            _check_name(name, "conductivity")
+            try:
+                v = float(value)
+            except (TypeError, ValueError):
+                raise ValueError(f"conductivity[{name!r}]: not a number: {value!r}") from None
+            if not math.isfinite(v) or v <= 0.0:
+                raise ValueError(f"conductivity[{name!r}] must be finite and > 0 W/(m K), got {v!r}")
+            k[name] = v
+        r: dict[frozenset, float] = {}
+        for pair, value in (resistance or {}).items():
+            if not isinstance(pair, Sequence) or isinstance(pair, str) or len(pair) != 2:
+                raise ValueError(f"resistance: keys must be pairs of phase names, got {pair!r}")
+            a, b = (_check_name(p, "resistance") for p in pair)
+            for p in (a, b):
+                if p not in k:
+                    raise ValueError(f"resistance[{pair!r}]: unknown phase {p!r} "
+                                     f"(known: {sorted(k)})")
+            try:
+                v = float(value)
+            except (TypeError, ValueError):
+                raise ValueError(f"resistance[{pair!r}]: not a number: {value!r}") from None
+            if math.isnan(v) or v < 0.0:
+                raise ValueError(f"resistance[{pair!r}] must be >= 0 m^2 K/W or inf, got {v!r}")
+            key = frozenset((a, b))
+            if key in r and r[key] != v:
+                raise ValueError(f"resistance: pair {pair!r} given twice with different values")
+            r[key] = v
+        if not isinstance(matrix, str) or matrix not in k:
+            raise ValueError(f"matrix: {matrix!r} is not a phase of conductivity (known: {sorted(k)})")
+        self._k = k
+        self._r = r
+        self.matrix = matrix
+
+    # ------------------------------------------------------------------ access
+    @property
+    def conductivity(self) -> dict[str, float]:
+        """Copy of the conductivity table, W/(m K)."""
+        return dict(self._k)
+
+    @property
+    def resistance(self) -> dict[tuple[str, str], float]:
+        """Copy of the resistance table with sorted pair keys, m^2 K/W."""
+        out = {}
+        for key, v in self._r.items():
+            names = sorted(key)
+            out[(names[0], names[-1])] = v
+        return out
+
+    @property
+    def phases(self) -> tuple[str, ...]:
+        return tuple(self._k)
+
+    def resistance_between(self, a: str, b: str) -> float:
+        """Resistance of the interface between phases ``a`` and ``b`` (m^2 K/W).
+
+        Raises
+        ------
+        ValueError
+            If the pair is not in the table (the message names the pair).
+        """
+        key = frozenset((a, b))
+        if key not in self._r:
+            raise ValueError(f"resistance: the microstructure needs the pair ({a!r}, {b!r}) "
+                             "but the resistance table has no entry for it")
+        return self._r[key]
+
+    def with_values(self, conductivity: Mapping[str, float] | None = None,
+                    resistance: Mapping[tuple[str, str], float] | None = None) -> "Materials":
+        """New ``Materials`` with some values replaced (the geometry-free parameter update)."""
+        k = dict(self._k)
+        k.update(conductivity or {})
+        r = self.resistance
+        for pair, v in (resistance or {}).items():
+            r = {p: val for p, val in r.items() if frozenset(p) != frozenset(pair)}
+            r[tuple(pair)] = v
+        return Materials(k, r, self.matrix)
+
+    # ----------------------------------------------------- tables for the solver
+    def tables(self, names: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
+        """Conductivity vector and resistance matrix indexed by material id.
+
+        Parameters
+        ----------
+        names : sequence of str
+            ``names[i]`` is the phase of material id ``i`` of a microstructure.
+
+        Returns
+        -------
+        k : ndarray, shape (m,)
+            W/(m K).
+        R : ndarray, shape (m, m)
+            m^2 K/W; ``nan`` where the table has no entry (only an error if a face needs it).
+        """
+        for n in names:
+            if n not in self._k:
+                raise ValueError(f"materials: the microstructure's phase {n!r} has no conductivity "
+                                 f"(known: {sorted(self._k)})")
+        m = len(names)
+        k = np.array([self._k[n] for n in names], dtype=np.float64)
+        R = np.full((m, m), np.nan)
+        for i in range(m):
+            for j in range(m):
+                key = frozenset((names[i], names[j]))
+                if key in self._r:
+                    R[i, j] = self._r[key]
+        return k, R
+
+    def __repr__(self) -> str:
+        return (f"Materials(conductivity={self._k!r}, resistance={self.resistance!r}, "
+                f"matrix={self.matrix!r})")

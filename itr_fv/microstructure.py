@@ -1,0 +1,280 @@
+"""Voxel microstructures: material id and particle id per voxel, plus the particle table."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["Microstructure", "ParticleTable"]
+
+
+@dataclass(frozen=True)
+class ParticleTable:
+    """Analytic geometry of the spheres behind a voxel image.
+
+    Attributes
+    ----------
+    centers_m : ndarray, shape (P, 3)
+        Sphere centres, m, inside the periodic box ``[0, box_m)``.
+    radii_m : ndarray, shape (P,)
+        Sphere radii, m.
+    material : ndarray of str, shape (P,)
+        Phase name of each sphere. Row ``i`` is particle id ``i + 1``.
+    """
+
+    centers_m: np.ndarray
+    radii_m: np.ndarray
+    material: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.radii_m.shape[0])
+
+
+def _shape3(shape: int | Sequence[int], argument: str = "shape") -> tuple[int, int, int]:
+    if isinstance(shape, (int, np.integer)):
+        shape = (int(shape),) * 3
+    try:
+        out = tuple(int(s) for s in shape)
+    except (TypeError, ValueError):
+        raise ValueError(f"{argument}: expected an int or three ints, got {shape!r}") from None
+    if len(out) != 3 or any(s != t for s, t in zip(out, shape)):
+        raise ValueError(f"{argument}: expected three integers, got {shape!r}")
+    if any(s < 1 for s in out):
+        raise ValueError(f"{argument}: every dimension must hold at least one voxel, got {out}")
+    return out  # type: ignore[return-value]
+
+
+def _positive_length(value: float, argument: str) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{argument}: not a number: {value!r}") from None
+    if not math.isfinite(v) or v <= 0.0:
+        raise ValueError(f"{argument} must be finite and > 0 (m), got {v!r}")
+    return v
+
+
+def _int_labels(a: object, argument: str) -> np.ndarray:
+    arr = np.asarray(a)
+    if arr.dtype == bool or not np.issubdtype(arr.dtype, np.integer):
+        raise ValueError(f"{argument}: expected an integer array, got dtype {arr.dtype}")
+    if arr.ndim != 3:
+        raise ValueError(f"{argument}: expected a 3-D array (n1, n2, n3), got shape {arr.shape}")
+    if arr.size == 0:
+        raise ValueError(f"{argument}: the grid holds zero voxels (shape {arr.shape})")
+    if arr.min() < 0:
+        raise ValueError(f"{argument}: labels must be >= 0")
+    return np.ascontiguousarray(arr, dtype=np.int32)
+
+
+class Microstructure:
+    """Periodic voxel image of a composite with per-voxel particle identity.
+
+    Use :meth:`from_spheres` or :meth:`from_labels` to build one.
+
+    Attributes
+    ----------
+    material_ids : ndarray of int32, shape (n1, n2, n3)
+        0 = matrix, ``i`` = phase ``names[i]``.
+    particle_ids : ndarray of int32, shape (n1, n2, n3)
+        0 = matrix, ``p`` = particle ``p`` (row ``p - 1`` of :attr:`particles`).
+    voxel_m : float
+        Voxel edge h, m.
+    names : tuple of str
+        Phase name per material id; ``names[0]`` is the matrix.
+    particles : ParticleTable or None
+        Analytic sphere geometry when known (used by the staircase correction).
+    """
+
+    def __init__(self, material_ids: np.ndarray, particle_ids: np.ndarray, voxel_m: float,
+                 names: Sequence[str], particles: ParticleTable | None = None) -> None:
+        self.material_ids = material_ids
+        self.particle_ids = particle_ids
+        self.voxel_m = voxel_m
+        self.names = tuple(names)
+        self.particles = particles
+
+    # ----------------------------------------------------------------- builders
+    @classmethod
+    def from_labels(cls, material_ids: np.ndarray, particle_ids: np.ndarray, voxel_m: float,
+                    names: Sequence[str], particles: ParticleTable | None = None
+                    ) -> "Microstructure":
+        """Build from plain label arrays.
+
+        Parameters
+        ----------
+        material_ids : int array, shape (n1, n2, n3)
+            0 = matrix, ``i`` = ``names[i]``.
+        particle_ids : int array, shape (n1, n2, n3)
+            0 = matrix, 1.. = particle index. A voxel is matrix in both arrays or in neither,
+            and every particle has a single material.
+        voxel_m : float
+            Voxel edge, m.
+        names : sequence of str
+            Phase per material id, ``names[0]`` the matrix.
+        particles : ParticleTable, optional
+            Sphere geometry if known. Without it the staircase correction is estimated
+            from the image (see :func:`itr_fv.model.face_geometry`).
+        """
+        mid = _int_labels(material_ids, "material_ids")
+        pid = _int_labels(particle_ids, "particle_ids")
+        if mid.shape != pid.shape:
+            raise ValueError(f"particle_ids: shape {pid.shape} differs from material_ids {mid.shape}")
+        h = _positive_length(voxel_m, "voxel_m")
+        if isinstance(names, str) or not isinstance(names, Sequence) or len(names) < 1:
+            raise ValueError("names: expected a sequence of phase names, names[0] the matrix")
+        names = tuple(names)
+        if any(not isinstance(n, str) or not n for n in names) or len(set(names)) != len(names):
+            raise ValueError(f"names: expected distinct non-empty strings, got {names!r}")
+        if mid.max() >= len(names):
+            raise ValueError(f"material_ids: id {int(mid.max())} has no entry in names {names!r}")
+        if np.any((mid == 0) != (pid == 0)):
+            raise ValueError("particle_ids: a voxel must be matrix (0) in both material_ids and "
+                             "particle_ids or in neither")
+        n_particles = int(pid.max())
+        if n_particles:
+            # every particle one material: min and max of material id per particle agree
+            flat_p = pid.ravel()
+            flat_m = mid.ravel()
+            lo = np.full(n_particles + 1, np.iinfo(np.int32).max, dtype=np.int64)
+            hi = np.full(n_particles + 1, -1, dtype=np.int64)
+            np.minimum.at(lo, flat_p, flat_m)
+            np.maximum.at(hi, flat_p, flat_m)
+            present = hi[1:] >= 0
+            if np.any(lo[1:][present] != hi[1:][present]):
+                bad = int(np.flatnonzero(present & (lo[1:] != hi[1:]))[0]) + 1
+                raise ValueError(f"particle_ids: particle {bad} spans several material ids")
+        if particles is not None:
+            if not isinstance(particles, ParticleTable):
+                raise ValueError("particles: expected a ParticleTable")
+            if len(particles) < n_particles:
+                raise ValueError(f"particles: table has {len(particles)} rows, labels need "
+                                 f"{n_particles}")
+        return cls(mid, pid, h, names, particles)
+
+    @classmethod
+    def from_spheres(cls, centers_m: np.ndarray, radii_m: np.ndarray,
+                     materials: Sequence[str] | str, box_m: float | Sequence[float],
+                     shape: int | Sequence[int], matrix: str = "matrix") -> "Microstructure":
+        """Voxelize periodic spheres (minimum image) on a grid of cubic voxels.
+
+        A voxel belongs to a sphere when its centre lies inside it; where spheres
+        overlap, the voxel goes to the sphere with the smallest ``distance / radius``.
+
+        Parameters
+        ----------
+        centers_m : array, shape (P, 3)
+            Sphere centres, m (wrapped into the box).
+        radii_m : array, shape (P,)
+            Radii, m, > 0 and smaller than half the box.
+        materials : str or sequence of str, length P
+            Phase name of each sphere (one name for all).
+        box_m : float or 3 floats
+            Edge lengths of the periodic box, m.
+        shape : int or 3 ints
+            Voxels per axis; ``box_m / shape`` must be the same h on every axis.
+        matrix : str
+            Name of the matrix phase.
+        """
+        n = _shape3(shape)
+        box = np.broadcast_to(np.asarray(box_m, dtype=np.float64), (3,)).copy() \
+            if np.ndim(box_m) <= 1 and np.size(box_m) in (1, 3) else None
+        if box is None:
+            raise ValueError(f"box_m: expected a length or three lengths (m), got {box_m!r}")
+        for d in range(3):
+            _positive_length(box[d], "box_m")
+        hs = box / np.array(n)
+        h = float(hs[0])
+        if not np.allclose(hs, h, rtol=1e-9, atol=0.0):
+            raise ValueError(f"box_m/shape: voxels must be cubic, box {box.tolist()} m over "
+                             f"shape {n} gives edges {hs.tolist()}")
+        c = np.asarray(centers_m, dtype=np.float64)
+        r = np.asarray(radii_m, dtype=np.float64)
+        if c.ndim != 2 or c.shape[1] != 3:
+            raise ValueError(f"centers_m: expected shape (P, 3), got {c.shape}")
+        if r.shape != (c.shape[0],):
+            raise ValueError(f"radii_m: expected shape ({c.shape[0]},), got {r.shape}")
+        if not (np.all(np.isfinite(c)) and np.all(np.isfinite(r))):
+            raise ValueError("centers_m/radii_m: NaN or inf in the sphere table")
+        if np.any(r <= 0):
+            raise ValueError("radii_m: every radius must be > 0 (m)")
+        if r.size and np.any(2 * r >= box.min()):
+            raise ValueError(f"radii_m: a sphere of diameter {2 * r.max():.4g} m does not fit the "
+                             f"periodic box {box.min():.4g} m")
+        if isinstance(materials, str):
+            mats = np.array([materials] * c.shape[0], dtype=object)
+        else:
+            mats = np.asarray(list(materials), dtype=object)
+            if mats.shape != (c.shape[0],):
+                raise ValueError(f"materials: expected {c.shape[0]} names, got {mats.shape}")
+        if not isinstance(matrix, str) or not matrix:
+            raise ValueError(f"matrix: expected a phase name, got {matrix!r}")
+        phase_names = [matrix]
+        for m in mats:
+            if not isinstance(m, str) or not m:
+                raise ValueError(f"materials: expected phase names, got {m!r}")
+            if m == matrix:
+                raise ValueError(f"materials: a sphere cannot be of the matrix phase {matrix!r}")
+            if m not in phase_names:
+                phase_names.append(m)
+        mat_index = np.array([phase_names.index(m) for m in mats], dtype=np.int32)
+        c = np.mod(c, box)
+        pid = _voxelize_spheres(c, r, n, h)
+        lut = np.concatenate([[0], mat_index]).astype(np.int32)
+        mid = lut[pid]
+        table = ParticleTable(c, r, np.asarray(mats, dtype=str))
+        return cls(mid, pid, h, tuple(phase_names), table)
+
+    # --------------------------------------------------------------- properties
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        return tuple(self.material_ids.shape)  # type: ignore[return-value]
+
+    @property
+    def box_m(self) -> np.ndarray:
+        """Edge lengths of the periodic box, m."""
+        return np.array(self.shape, dtype=np.float64) * self.voxel_m
+
+    @property
+    def n_particles(self) -> int:
+        return int(self.particle_ids.max())
+
+    def volume_fractions(self) -> dict[str, float]:
+        """Voxel volume fraction of every phase."""
+        counts = np.bincount(self.material_ids.ravel(), minlength=len(self.names))
+        return {n: float(cnt) / self.material_ids.size for n, cnt in zip(self.names, counts)}
+
+    def __repr__(self) -> str:
+        fr = ", ".join(f"{k}={v:.3f}" for k, v in self.volume_fractions().items())
+        return (f"Microstructure(shape={self.shape}, voxel_m={self.voxel_m:.4g}, "
+                f"particles={self.n_particles}, fractions: {fr})")
+
+
+def _voxelize_spheres(c: np.ndarray, r: np.ndarray, n: tuple[int, int, int],
+                      h: float) -> np.ndarray:
+    """Particle id per voxel (0 = matrix) for periodic spheres; voxel centres at (i + 1/2) h."""
+    pid = np.zeros(n, dtype=np.int32)
+    best = np.full(n, np.inf, dtype=np.float64)
+    for p in range(c.shape[0]):
+        ranges = []
+        for d in range(3):
+            lo = math.ceil((c[p, d] - r[p]) / h - 0.5)
+            hi = math.floor((c[p, d] + r[p]) / h - 0.5)
+            ranges.append(np.arange(lo, hi + 1))
+        if any(len(a) == 0 for a in ranges):
+            continue
+        dx = [((a + 0.5) * h - c[p, d]) / r[p] for d, a in enumerate(ranges)]
+        q = dx[0][:, None, None] ** 2 + dx[1][None, :, None] ** 2 + dx[2][None, None, :] ** 2
+        ii = np.ix_(*(np.mod(a, n[d]) for d, a in enumerate(ranges)))
+        sub = best[ii]
+        take = (q <= 1.0) & (q < sub)
+        if not take.any():
+            continue
+        sub = np.where(take, q, sub)
+        best[ii] = sub
+        cur = pid[ii]
+        pid[ii] = np.where(take, p + 1, cur)
+    return pid

@@ -1,0 +1,163 @@
+"""Pieces every homogenization solver shares: argument checks, gauge, result assembly.
+
+A solver (``itr_fv.homogenize``, ``itr_fft.homogenize``) computes the periodic fields theta
+for the requested load cases of the system of :mod:`itr_fv.model`; everything after that
+(temperatures, fluxes, tensor, clusters, convergence verdict) is done here, once.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from collections.abc import Callable, Sequence
+
+import numpy as np
+
+from .materials import Materials
+from .microstructure import Microstructure
+from .model import connected_components, cell_centres, face_fluxes, mean_flux
+from .result import ConvergenceError, FloatingClusters, HomogenizationResult
+
+__all__ = ["check_solver_args", "check_x0", "SolveRecord", "build_result", "floating_clusters"]
+
+Callback = Callable[[int, int, float], None]
+
+
+def check_solver_args(ms: Microstructure, mat: Materials, tol: float, maxiter: int | None,
+                      directions: Sequence[int], callback: Callback | None,
+                      default_maxiter: int) -> tuple[float, int, tuple[int, ...]]:
+    """Validate the common solver arguments; returns (tol, maxiter, directions)."""
+    if not isinstance(ms, Microstructure):
+        raise ValueError(f"ms: expected a Microstructure, got {type(ms).__name__}")
+    if not isinstance(mat, Materials):
+        raise ValueError(f"mat: expected a Materials object, got {type(mat).__name__}")
+    if ms.names[0] != mat.matrix:
+        raise ValueError(f"mat: matrix phase {mat.matrix!r} differs from the microstructure's "
+                         f"matrix {ms.names[0]!r}")
+    try:
+        tol = float(tol)
+    except (TypeError, ValueError):
+        raise ValueError(f"tol: not a number: {tol!r}") from None
+    if not math.isfinite(tol) or tol <= 0.0 or tol >= 1.0:
+        raise ValueError(f"tol: relative residual tolerance must be in (0, 1), got {tol!r}")
+    if maxiter is None:
+        maxiter = default_maxiter
+    if isinstance(maxiter, bool) or not isinstance(maxiter, (int, np.integer)) or maxiter < 1:
+        raise ValueError(f"maxiter: expected a positive integer, got {maxiter!r}")
+    try:
+        dirs = tuple(int(d) for d in directions)
+    except (TypeError, ValueError):
+        raise ValueError(f"directions: expected a sequence of axes 0, 1, 2, got {directions!r}") \
+            from None
+    if not dirs or len(set(dirs)) != len(dirs) or any(d not in (0, 1, 2) for d in dirs):
+        raise ValueError(f"directions: expected distinct axes among 0, 1, 2, got {directions!r}")
+    if callback is not None and not callable(callback):
+        raise ValueError("callback: expected a callable callback(direction, iteration, residual)")
+    return tol, int(maxiter), dirs
+
+
+def check_x0(x0: np.ndarray | None, shape: tuple[int, int, int],
+             directions: tuple[int, ...]) -> np.ndarray | None:
+    """Validate a warm start: shape (len(directions), n1, n2, n3), finite."""
+    if x0 is None:
+        return None
+    x0 = np.asarray(x0, dtype=np.float64)
+    want = (len(directions),) + tuple(shape)
+    if x0.shape == tuple(shape) and len(directions) == 1:
+        x0 = x0[None]
+    if x0.shape != want:
+        raise ValueError(f"x0: expected shape {want} (one theta per load case), got {x0.shape}")
+    if not np.all(np.isfinite(x0)):
+        raise ValueError("x0: contains NaN or inf")
+    return x0
+
+
+def floating_clusters(g: np.ndarray) -> tuple[FloatingClusters, np.ndarray | None]:
+    """Clusters cut off by insulating faces; returns the summary and the labels (or None)."""
+    if np.all(g > 0):
+        return FloatingClusters(0, np.zeros(0, dtype=np.int64), 0.0), None
+    n, labels = connected_components(g)
+    if n == 1:
+        return FloatingClusters(0, np.zeros(0, dtype=np.int64), 0.0), None
+    sizes = np.bincount(labels.ravel(), minlength=n)
+    return FloatingClusters(n - 1, sizes[1:], float(sizes[1:].sum() / labels.size)), labels
+
+
+def remove_cluster_means(theta: np.ndarray, labels: np.ndarray | None) -> np.ndarray:
+    """Fix the gauge: zero mean of theta on every connected cluster (in place)."""
+    if labels is None:
+        theta -= theta.mean()
+        return theta
+    flat = labels.ravel()
+    n = int(flat.max()) + 1
+    sums = np.bincount(flat, weights=theta.ravel(), minlength=n)
+    counts = np.bincount(flat, minlength=n)
+    theta -= (sums / counts)[labels]
+    return theta
+
+
+class SolveRecord:
+    """What a solver hands over per load case: theta, iterations and residuals."""
+
+    def __init__(self, direction: int, theta: np.ndarray, iterations: int,
+                 history: Sequence[float], residual: float, seconds: float) -> None:
+        self.direction = direction
+        self.theta = theta
+        self.iterations = iterations
+        self.history = np.asarray(history, dtype=np.float64)
+        self.residual = residual
+        self.seconds = seconds
+
+
+def build_result(ms: Microstructure, g: np.ndarray, records: list[SolveRecord],
+                 labels: np.ndarray | None, floating: FloatingClusters, tol: float,
+                 setup_time: float, wall_time: float, solver: str, store_fields: bool,
+                 strict: bool, info: dict | None = None) -> HomogenizationResult:
+    """Turn per-load-case fields into a :class:`HomogenizationResult`.
+
+    Raises
+    ------
+    ConvergenceError
+        If ``strict`` and a load case did not reach ``tol``; otherwise a RuntimeWarning.
+    """
+    h = ms.voxel_m
+    K = np.full((3, 3), np.nan)
+    temps, thetas, fluxes = [], [], []
+    for rec in records:
+        E = np.zeros(3)
+        E[rec.direction] = 1.0
+        remove_cluster_means(rec.theta, labels)
+        K[:, rec.direction] = mean_flux(g, rec.theta, h, E)
+        if store_fields:
+            thetas.append(rec.theta)
+            temps.append(rec.theta - cell_centres(ms.shape, h, rec.direction))
+            fluxes.append(face_fluxes(g, rec.theta, h, E))
+    converged = all(rec.residual <= tol for rec in records)
+    result = HomogenizationResult(
+        k_eff=K,
+        directions=tuple(rec.direction for rec in records),
+        iterations=[rec.iterations for rec in records],
+        residuals=[rec.residual for rec in records],
+        residual_history=[rec.history for rec in records],
+        converged=converged,
+        temperature=np.stack(temps) if store_fields else None,
+        theta=np.stack(thetas) if store_fields else None,
+        fluxes=np.stack(fluxes) if store_fields else None,
+        setup_time=setup_time,
+        solve_times=[rec.seconds for rec in records],
+        wall_time=wall_time,
+        floating=floating,
+        solver=solver,
+        tol=tol,
+        microstructure=ms,
+        info=dict(info or {}),
+    )
+    if not converged:
+        bad = [f"e{rec.direction + 1}: {rec.residual:.2e} after {rec.iterations} iterations"
+               for rec in records if rec.residual > tol]
+        msg = (f"{solver}: not converged to tol={tol:.1e} ({'; '.join(bad)}); raise maxiter, "
+               "or pass strict=False to accept the partial result")
+        if strict:
+            raise ConvergenceError(msg, result)
+        warnings.warn(msg, RuntimeWarning, stacklevel=3)
+    return result
