@@ -56,6 +56,10 @@ class HomogenizationResult:
     k_eff : ndarray, shape (3, 3)
         Effective conductivity tensor, W/(m K); ``k_eff[i, j] = <q_i>`` for the load
         E = e_j (1 K/m). Columns of directions not solved are NaN.
+    k_eff_energy : ndarray, shape (3, 3)
+        Variational estimate ``<dT_i g dT_j>`` of the same tensor, W/(m K): symmetric by
+        construction, error quadratic in the solver error (see
+        :func:`itr_fv.model.energy_tensor`). Agrees with ``k_eff`` to about the solver tolerance.
     directions : tuple of int
         The load cases solved, in order.
     iterations : list of int
@@ -84,6 +88,7 @@ class HomogenizationResult:
     """
 
     k_eff: np.ndarray
+    k_eff_energy: np.ndarray
     directions: tuple[int, ...]
     iterations: list[int]
     residuals: list[float]
@@ -123,6 +128,14 @@ class HomogenizationResult:
         """
         from .vtk_output import write_vti
         return write_vti(self, path)
+
+    def render_png(self, path: str | Path, load_case: int = 0) -> Path:
+        """Off-screen PNG of the temperature slices and the particles.
+
+        See :func:`itr_fv.vtk_output.render_png`.
+        """
+        from .vtk_output import render_png
+        return render_png(self, path, load_case=load_case)
 
     def summary(self) -> str:
         """Human-readable summary of tensor, iterations and residuals."""

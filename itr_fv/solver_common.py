@@ -15,7 +15,7 @@ import numpy as np
 
 from .materials import Materials
 from .microstructure import Microstructure
-from .model import connected_components, cell_centres, face_fluxes, mean_flux
+from .model import cell_centres, connected_components, energy_tensor, face_fluxes, mean_flux
 from .result import ConvergenceError, FloatingClusters, HomogenizationResult
 
 __all__ = ["check_solver_args", "check_x0", "SolveRecord", "build_result", "floating_clusters"]
@@ -133,8 +133,11 @@ def build_result(ms: Microstructure, g: np.ndarray, records: list[SolveRecord],
             temps.append(rec.theta - cell_centres(ms.shape, h, rec.direction))
             fluxes.append(face_fluxes(g, rec.theta, h, E))
     converged = all(rec.residual <= tol for rec in records)
+    K_energy = energy_tensor(g, [rec.theta for rec in records], h,
+                             tuple(rec.direction for rec in records))
     result = HomogenizationResult(
         k_eff=K,
+        k_eff_energy=K_energy,
         directions=tuple(rec.direction for rec in records),
         iterations=[rec.iterations for rec in records],
         residuals=[rec.residual for rec in records],

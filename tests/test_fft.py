@@ -1,0 +1,166 @@
+"""itr_fft: FFT-preconditioned CG on the discrete model, cross-checked against itr_fv."""
+
+from __future__ import annotations
+
+import sys
+import warnings
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+import itr_fft  # noqa: E402
+import itr_fv  # noqa: E402
+from itr_fv import ConvergenceError, Materials, Microstructure  # noqa: E402
+from itr_fv.model import apply_operator, face_conductances, load_vector  # noqa: E402
+from validation.rve_set import build, rve_cases, sphere_array  # noqa: E402
+
+CASES = [c.name for c in rve_cases()]
+
+
+def _rel(a: np.ndarray, b: np.ndarray) -> float:
+    return float(np.abs(a - b).max() / np.abs(b).max())
+
+
+@pytest.mark.parametrize("name", CASES)
+def test_fft_matches_fv_on_common_set(name):
+    """Acceptance 1 at CI size: the two solvers give the same tensor to <= 1e-6."""
+    ms, mat = build(name, "ci")
+    fft = itr_fft.homogenize(ms, mat, tol=1e-10, store_fields=False)
+    fv = itr_fv.homogenize(ms, mat, tol=1e-10, store_fields=False)
+    assert fft.converged and fv.converged
+    assert fft.solver == "itr_fft"
+    assert _rel(np.diag(fft.k_eff), np.diag(fv.k_eff)) <= 1e-6
+    assert _rel(fft.k_eff, fv.k_eff) <= 1e-6
+    assert fft.floating.count == fv.floating.count
+    assert max(fft.residuals) <= 1e-10
+
+
+def test_operator_is_the_fv_operator():
+    """The numba stencil is A of itr_fv.model (same faces, same load vector)."""
+    from itr_fft import _kernels as K
+    ms, mat = build("random30", 24)
+    g = face_conductances(ms, mat)
+    rng = np.random.default_rng(0)
+    th = rng.standard_normal(ms.shape)
+    q = np.empty_like(th)
+    pq = K.matvec_dot(g, th, q)
+    ref = apply_operator(g, th)
+    assert np.allclose(q, ref, rtol=1e-12, atol=1e-12 * np.abs(ref).max())
+    assert pq == pytest.approx(float(np.sum(th * ref)), rel=1e-12)
+    b = np.empty_like(th)
+    for d in range(3):
+        E = np.zeros(3)
+        E[d] = 1.0
+        K.load_into(g, d, ms.voxel_m, b)
+        assert np.allclose(b, load_vector(g, ms.voxel_m, E), rtol=1e-12, atol=0)
+
+
+def test_iterations_do_not_grow_with_grid():
+    """Acceptance 2 (CI size): same spheres at 32^3 and 64^3, iterations within 20 %."""
+    its = []
+    for n in (32, 64):
+        ms, mat = sphere_array("fcc", n, 0.50, 1e-7)
+        res = itr_fft.homogenize(ms, mat, tol=1e-8, directions=(0,), store_fields=False)
+        its.append(res.iterations[0])
+    assert abs(its[1] - its[0]) <= 0.2 * its[0], its
+
+
+def test_warm_start_from_neighbouring_resistance():
+    """Acceptance 3: theta of R = 1e-7 warm-starts R = 5e-7 (one Table 4 step)."""
+    ms, mat = build("al2o3_60", "ci")
+    geom = itr_fv.model.face_geometry(ms)
+    pairs = {("Al2O3", "silicone"), ("Al2O3", "Al2O3")}
+    first = itr_fft.homogenize(ms, mat.with_values(resistance={p: 1e-7 for p in pairs}),
+                               tol=1e-8, geometry=geom)
+    mat2 = mat.with_values(resistance={p: 5e-7 for p in pairs})
+    cold = itr_fft.homogenize(ms, mat2, tol=1e-8, geometry=geom, store_fields=False)
+    warm = itr_fft.homogenize(ms, mat2, tol=1e-8, geometry=geom, x0=first.theta,
+                              store_fields=False)
+    assert _rel(warm.k_eff, cold.k_eff) < 1e-7
+    assert sum(cold.iterations) >= 2 * sum(warm.iterations), (cold.iterations, warm.iterations)
+
+
+def test_non_convergence_raises_or_warns():
+    """Acceptance 6: maxiter reached -> ConvergenceError; strict=False -> flag + warning."""
+    ms, mat = build("random30", "ci")
+    with pytest.raises(ConvergenceError) as err:
+        itr_fft.homogenize(ms, mat, tol=1e-10, maxiter=3)
+    part = err.value.result
+    assert not part.converged and part.iterations == [3, 3, 3]
+    with pytest.warns(RuntimeWarning, match="not converged"):
+        res = itr_fft.homogenize(ms, mat, tol=1e-10, maxiter=3, strict=False)
+    assert not res.converged
+    assert all(r > 1e-10 for r in res.residuals)
+    assert np.all(np.isfinite(res.k_eff))
+
+
+def test_insulating_interfaces_floating_clusters():
+    """R = inf: particles float; singular but consistent system converges; matches FV."""
+    ms, mat = build("random30_Rinf", 24)
+    fft = itr_fft.homogenize(ms, mat, tol=1e-10)
+    fv = itr_fv.homogenize(ms, mat, tol=1e-10, store_fields=False)
+    assert fft.converged and fft.floating.count == ms.n_particles
+    assert _rel(fft.k_eff, fv.k_eff) <= 1e-6
+    # insulating particles: below the matrix, no flux into the particles
+    assert np.all(np.diag(fft.k_eff) < 0.18)
+    pid = ms.particle_ids
+    for p in np.unique(pid[pid > 0])[:5]:  # zero mean theta on each floating cluster
+        assert abs(fft.theta[0][pid == p].mean()) < 1e-12 * np.abs(fft.theta[0]).max() + 1e-20
+
+
+def test_float32_option_agrees():
+    ms, mat = build("al2o3_60", "ci")
+    r64 = itr_fft.homogenize(ms, mat, tol=1e-10, store_fields=False)
+    r32 = itr_fft.homogenize(ms, mat, tol=2e-6, dtype=np.float32, store_fields=False)
+    assert r32.converged and r32.info["dtype"] == "float32"
+    assert _rel(r32.k_eff, r64.k_eff) <= 1e-6
+    with pytest.raises(ValueError, match="tol"):
+        itr_fft.homogenize(ms, mat, tol=1e-7, dtype=np.float32)
+
+
+def test_reference_conductivity_does_not_change_iterations():
+    """PCG is invariant to a constant scale of the preconditioner."""
+    ms, mat = build("bcc_R1e-8", "ci")
+    its = {ref: itr_fft.homogenize(ms, mat, tol=1e-8, directions=(2,), reference=ref,
+                                   store_fields=False).iterations[0]
+           for ref in ("geometric", "min", "max", "arithmetic")}
+    assert max(its.values()) - min(its.values()) <= 1, its
+
+
+def test_argument_checks_and_callback():
+    ms, mat = build("sc_R0", 16)
+    with pytest.raises(ValueError, match="dtype"):
+        itr_fft.homogenize(ms, mat, dtype=np.int32)
+    with pytest.raises(ValueError, match="workers"):
+        itr_fft.homogenize(ms, mat, workers=0)
+    with pytest.raises(ValueError, match="x0"):
+        itr_fft.homogenize(ms, mat, x0=np.zeros((2, 16, 16, 16)))
+    with pytest.raises(ValueError, match="tol"):
+        itr_fft.homogenize(ms, mat, tol=2.0)
+    with pytest.raises(ValueError, match="directions"):
+        itr_fft.homogenize(ms, mat, directions=(3,))
+    seen = []
+    res = itr_fft.homogenize(ms, mat, directions=(1,), callback=lambda *a: seen.append(a))
+    assert [s[1] for s in seen] == list(range(1, res.iterations[0] + 1))
+    assert all(s[0] == 1 for s in seen)
+    assert np.isnan(res.k_eff[:, 0]).all() and np.isfinite(res.k_eff[:, 1]).all()
+    assert res.temperature.shape == (1, 16, 16, 16)
+
+
+def test_homogeneous_medium_needs_no_iteration():
+    mid = np.zeros((8, 8, 8), dtype=np.int32)
+    ms = Microstructure.from_labels(mid, mid, voxel_m=1e-6, names=("silicone",))
+    res = itr_fft.homogenize(ms, Materials({"silicone": 0.18}, matrix="silicone"))
+    assert res.iterations == [0, 0, 0]
+    assert np.allclose(res.k_eff, 0.18 * np.eye(3), rtol=1e-14)
+
+
+def test_choose_solver():
+    assert itr_fft.choose_solver((256, 256, 256)) == "itr_fft"
+    assert itr_fft.choose_solver(8) in ("itr_fv", "itr_fft")
+    ms, mat = build("sc_R0", 16)
+    res = itr_fft.homogenize_auto(ms, mat, tol=1e-8)
+    assert res.converged and res.solver == itr_fft.choose_solver(ms.shape)
