@@ -5,7 +5,16 @@ Public API::
     import itr_fft
     res = itr_fft.homogenize(ms, mat, tol=1e-8)       # same signature/result as itr_fv
     itr_fft.choose_solver(ms.shape)                    # "itr_fv" or "itr_fft"
+
+Importing the package sets ``OMP_WAIT_POLICY=PASSIVE`` unless the caller set it: numba's
+OpenMP threads otherwise spin at every barrier, and on a machine shared with other jobs
+(2 cores, load 4-6) that made two threads 5-10x slower than one; passive waiting made
+them ~2x faster than one. It has to be in place before numba starts its thread pool.
 """
+
+import os as _os
+
+_os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 from .auto import choose_solver, homogenize_auto
 from .solver import FLOAT32_MIN_TOL, homogenize, reference_conductance

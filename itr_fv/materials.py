@@ -114,8 +114,9 @@ class Materials:
         """
         key = frozenset((a, b))
         if key not in self._r:
-            raise ValueError(f"resistance: the microstructure needs the pair ({a!r}, {b!r}) "
-                             "but the resistance table has no entry for it")
+            first, second = sorted((a, b))
+            raise ValueError(f"resistance: the microstructure needs the pair ({first!r}, "
+                             f"{second!r}) but the resistance table has no entry for it")
         return self._r[key]
 
     def with_values(self, conductivity: Mapping[str, float] | None = None,
