@@ -1,4 +1,12 @@
-"""Pick the cheaper solver for a grid (placeholder crossover, set from the benchmark)."""
+"""Pick the cheaper solver for a grid, from the measured crossover.
+
+Measured (validation/results/crossval.md, bench_solvers.md; shared 2-core machine):
+itr_fft was faster than itr_fv at every size tried -- 24^3 (0.1-0.3 s vs 0.6-20 s),
+64^3 (1-7 s vs 21-32 s for the sphere arrays, 3 s vs FV for the dense 60 % RVE) and
+128^3 -- because pyamg's set-up alone costs more than the whole FFT solve. There is no
+crossover in the measured range, so ``CROSSOVER_VOXELS = 0``: always itr_fft. itr_fv stays
+the reference (and the fallback a caller can force).
+"""
 
 from __future__ import annotations
 
@@ -8,7 +16,7 @@ import numpy as np
 
 __all__ = ["choose_solver", "homogenize_auto", "CROSSOVER_VOXELS"]
 
-#: Grids with fewer voxels than this are solved by itr_fv (measured crossover).
+#: Grids with fewer voxels than this are solved by itr_fv (measured: none, see above).
 CROSSOVER_VOXELS = 0
 
 

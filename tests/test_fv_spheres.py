@@ -76,3 +76,17 @@ def test_random_polydisperse_tensor_symmetric_and_isotropic():
     assert max(spreads) < 0.1
     # and well above the matrix: the fillers conduct
     assert min(means) > 0.18 * 1.3
+
+
+def test_label_image_staircase_estimate_close_to_analytic_normals():
+    """Without a particle table the normals come from the smoothed image (documented)."""
+    from itr_fv import Microstructure
+    f = 0.3
+    ms = sc_sphere(48, f)
+    labels = Microstructure.from_labels(ms.material_ids, ms.particle_ids, ms.voxel_m, ms.names)
+    mat = sc_materials(10.0, 0.5 * radius(f))
+    analytic = homogenize(ms, mat, tol=1e-10, directions=(0,)).k_eff[0, 0]
+    image = homogenize(labels, mat, tol=1e-10, directions=(0,))
+    assert image.info["staircase"] == "image"
+    assert image.k_eff[0, 0] == pytest.approx(analytic, rel=0.005)
+    assert image.k_eff[0, 0] == pytest.approx(SC_ALPHA_05, rel=0.01)

@@ -209,7 +209,7 @@ def test_generate_rve_bad_input():
 def test_beyond_jamming_limit_states_estimate():
     with pytest.raises(ValueError, match=r"specs: .*0\.69 exceeds .*limit 0\.6[78]"):
         generate_rve(FillerSpec.from_table1("Al2O3", 0.69), 40.0, 0.3125, seed=0)
-    with pytest.raises(ValueError, match="specs"):
+    with pytest.raises(ValueError, match="specs"), pytest.warns(UserWarning, match="AlN"):
         generate_rve([FillerSpec.from_table1("Al2O3", 0.40),
                       FillerSpec.from_table1("AlN", 0.35)], 40.0, 0.3125, seed=0)
     with pytest.raises(ValueError, match="specs"):
