@@ -8,8 +8,6 @@ import sys
 import time
 from pathlib import Path
 
-import numpy as np
-
 __all__ = ["main"]
 
 # The paper's identified resistances (Table 5), m^2 K/W, and its conductivities, W/(m K).

@@ -8,6 +8,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .checks import finite_number
+
 __all__ = ["Microstructure", "ParticleTable"]
 
 
@@ -48,11 +50,8 @@ def _shape3(shape: int | Sequence[int], argument: str = "shape") -> tuple[int, i
 
 
 def _positive_length(value: float, argument: str) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{argument}: not a number: {value!r}") from None
-    if not math.isfinite(v) or v <= 0.0:
+    v = finite_number(value, argument)
+    if v <= 0.0:
         raise ValueError(f"{argument} must be finite and > 0 (m), got {v!r}")
     return v
 

@@ -16,7 +16,9 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import optimize, special, stats
+from scipy import optimize, special
+
+from .checks import finite_number as _finite
 
 __all__ = ["LogNormalPSD", "HistogramFit", "TABLE1", "fit_histogram", "fit_sample",
            "fit_truncated_sample", "histogram_from_sample", "phi_rcp_lognormal",
@@ -29,16 +31,6 @@ def _check_basis(basis: str, argument: str = "basis") -> str:
     if basis not in _BASES:
         raise ValueError(f"{argument}: expected 'number' or 'volume', got {basis!r}")
     return basis
-
-
-def _finite(value: float, argument: str) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"{argument}: not a number: {value!r}") from None
-    if not math.isfinite(v):
-        raise ValueError(f"{argument} must be finite, got {v!r}")
-    return v
 
 
 @dataclass(frozen=True)

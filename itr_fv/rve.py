@@ -47,21 +47,18 @@ from dataclasses import asdict, dataclass, field
 import numpy as np
 from scipy import special, stats
 
+from .checks import finite_number as _num
 from .microstructure import Microstructure
 from .packing import pack_spheres, pairs_within_gap
-from .psd import TABLE1, LogNormalPSD, fit_sample, fit_truncated_sample, phi_rcp_lognormal
+from .psd import (
+    TABLE1,
+    LogNormalPSD,
+    fit_sample,
+    fit_truncated_sample,
+    phi_rcp_lognormal,
+)
 
 __all__ = ["FillerSpec", "FillerReport", "RVEReport", "generate_rve", "packing_limit"]
-
-
-def _num(value: object, argument: str) -> float:
-    try:
-        v = float(value)  # type: ignore[arg-type]
-    except (TypeError, ValueError):
-        raise ValueError(f"{argument}: not a number: {value!r}") from None
-    if not math.isfinite(v):
-        raise ValueError(f"{argument} must be finite, got {v!r}")
-    return v
 
 
 @dataclass(frozen=True)

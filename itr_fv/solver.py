@@ -14,8 +14,14 @@ from .materials import Materials
 from .microstructure import Microstructure
 from .model import FaceGeometry, face_geometry, load_vector
 from .result import HomogenizationResult
-from .solver_common import (Callback, SolveRecord, build_result, check_solver_args, check_x0,
-                            floating_clusters)
+from .solver_common import (
+    Callback,
+    SolveRecord,
+    build_result,
+    check_solver_args,
+    check_x0,
+    floating_clusters,
+)
 
 __all__ = ["homogenize", "assemble_operator"]
 

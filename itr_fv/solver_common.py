@@ -15,7 +15,13 @@ import numpy as np
 
 from .materials import Materials
 from .microstructure import Microstructure
-from .model import cell_centres, connected_components, energy_tensor, face_fluxes, mean_flux
+from .model import (
+    cell_centres,
+    connected_components,
+    energy_tensor,
+    face_fluxes,
+    mean_flux,
+)
 from .result import ConvergenceError, FloatingClusters, HomogenizationResult
 
 __all__ = ["check_solver_args", "check_x0", "SolveRecord", "build_result", "floating_clusters"]

@@ -50,12 +50,14 @@ def one(solver: str, n: int, dtype: str = "float64") -> dict:
     rss_build = _rss_mb()
     if solver == "itr_fft":
         import itr_fft
+
         # compile/load the kernels outside the timing (cache=True makes this a load)
         from validation.rve_set import build as _b
         ms8, mat8 = _b(CASE, 16)
         itr_fft.homogenize(ms8, mat8, tol=1e-6, store_fields=False, dtype=np.dtype(dtype).type)
         rss_build = max(rss_build, _rss_mb())
-        res = itr_fft.homogenize(ms, mat, tol=TOL, store_fields=False,
+        tol = TOL if dtype == "float64" else 2e-6  # float32 cannot reach 1e-8
+        res = itr_fft.homogenize(ms, mat, tol=tol, store_fields=False,
                                  dtype=np.dtype(dtype).type)
     else:
         import itr_fv
