@@ -62,6 +62,7 @@ def main() -> None:
         print(json.dumps(one_case(int(args.one[0]), float(args.one[1]), args.one[2])))
         return
     rows = []
+    load = os.getloadavg()[0]
     header = ("| n^3 | R (m^2K/W) | AMG | set-up (s) | solve per load case (s) | iterations | "
               "k_xx, k_yy, k_zz (W/mK) | peak RSS (MB) |")
     print(header)
@@ -82,7 +83,9 @@ def main() -> None:
         f"Python {platform.python_version()}. Dense random Al2O3/silicone RVEs, 55 vol%, "
         "0.3125 um voxels (box = 0.3125 n um), k_p/k_m = 30/0.18 = 167, R applied to "
         "filler-matrix and filler-filler faces; tol = 1e-8 (relative residual); each case in "
-        "a fresh process (peak RSS includes the RVE generation and Python itself).", "",
+        "a fresh process (peak RSS includes the RVE generation and Python itself). "
+        f"Load average when the run started: {load:.1f} (times above ~{max(load, 2) / 2:.0f}x "
+        "inflated where other jobs shared the 2 cores).", "",
         header, "|---|---|---|---|---|---|---|---|", *rows, "",
     ]
     (RESULTS / "bench_fv.md").write_text("\n".join(text))

@@ -1,0 +1,246 @@
+"""Voxel-size study on a dense random RVE: which voxel gives k_eff within 2 % of the limit?
+
+A 60 vol% Al2O3 RVE (lognormal mu = 1.02, sigma = 0.35 of the paper's Table 1) in silicone,
+k = 30 / 0.18 W/(m K), R_fp = 2.2e-8 m^2K/W and R_ff = 2e-7 m^2K/W (the paper's Table 5), and
+the same with R_ff = 0 (particle-particle faces without contact resistance), is voxelized at
+0.4 ... 0.1 um and solved with the FFT solver (three load cases, k_iso = trace / 3).
+
+Box: the paper's 40 um box at 0.1 um would be 400^3 voxels, beyond this machine; a 16 um box
+(160^3 at 0.1 um) with the same size distribution is used instead. Its particle table is
+generated once per seed (``generate_rve`` at the coarsest voxel, 0.4 um, so every particle has
+d >= 0.8 um = 2 voxels there, and ``max_diameter_box_ratio = 0.49``: the box cuts the lognormal
+at 7.84 um, 2.7 % of the filler volume, instead of 5.33 um = 21 % with the default box / 3) and
+re-voxelized with ``Microstructure.from_spheres`` at every voxel size: the same particles at
+every resolution, so only the discretization changes.
+
+Extrapolation: k(h) = k_0 + c h^p fitted to the three finest grids (p free, Richardson with the
+observed order; p = 1 if the fit gives p outside [0.5, 3]); the recommendation is the largest
+voxel with |k(h) / k_0 - 1| <= 2 % in every configuration and seed.
+
+Rows are appended to ``validation/results/resolution.csv`` (re-running skips done rows);
+``validation/results/resolution.md`` is rebuilt from it.
+
+Run:  /work/venv/bin/python validation/resolution_study.py [--seeds 1 2] [--report-only]
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import math
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from itr_fv import Materials, Microstructure
+
+RESULTS = Path(__file__).resolve().parent / "results"
+CSV_PATH = RESULTS / "resolution.csv"
+MD_PATH = RESULTS / "resolution.md"
+
+BOX_UM = 16.0
+VOXELS_UM = (0.4, 0.32, 0.25, 0.2, 0.16, 0.125, 0.1)
+K_SILICONE, K_AL2O3 = 0.18, 30.0
+R_FP = 2.2e-8
+CONFIGS = {"R_ff = 2e-7": 2.0e-7, "R_ff = 0": 0.0}
+PHI = 0.60
+TOL = 1e-8
+BOX_RATIO = 0.49
+FIELDS = ["seed", "config", "R_ff", "voxel_um", "n", "k_xx", "k_yy", "k_zz", "k_iso",
+          "voxel_phi", "iterations", "wall_s"]
+_PARTICLES: dict = {}
+
+
+def particles(seed: int):
+    """(centres um, radii um, materials, report) of the seed's RVE (cached)."""
+    if seed not in _PARTICLES:
+        from itr_fv.rve import FillerSpec, generate_rve
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)  # box-size truncation notice
+            ms, rep = generate_rve([FillerSpec("Al2O3", mu=1.02, sigma=0.35,
+                                               volume_fraction=PHI)],
+                                   box_um=BOX_UM, voxel_um=max(VOXELS_UM), seed=seed,
+                                   max_diameter_box_ratio=BOX_RATIO, max_iter=2_000_000,
+                                   return_report=True)
+        t = ms.particles
+        _PARTICLES[seed] = (t.centers_m, t.radii_m, [str(m) for m in t.material], rep)
+    return _PARTICLES[seed]
+
+
+def materials(r_ff: float) -> Materials:
+    return Materials(conductivity={"silicone": K_SILICONE, "Al2O3": K_AL2O3},
+                     resistance={("Al2O3", "silicone"): R_FP, ("Al2O3", "Al2O3"): r_ff},
+                     matrix="silicone")
+
+
+def solve(seed: int, config: str, voxel_um: float) -> dict:
+    import itr_fft
+    c, r, m, _ = particles(seed)
+    n = int(round(BOX_UM / voxel_um))
+    ms = Microstructure.from_spheres(c, r, m, box_m=BOX_UM * 1e-6, shape=(n, n, n),
+                                     matrix="silicone")
+    t0 = time.perf_counter()
+    res = itr_fft.homogenize(ms, materials(CONFIGS[config]), tol=TOL, store_fields=False)
+    wall = time.perf_counter() - t0
+    k = res.k_eff
+    return {"seed": seed, "config": config, "R_ff": CONFIGS[config], "voxel_um": voxel_um,
+            "n": n, "k_xx": f"{k[0, 0]:.8g}", "k_yy": f"{k[1, 1]:.8g}", "k_zz": f"{k[2, 2]:.8g}",
+            "k_iso": f"{np.trace(k) / 3:.8g}",
+            "voxel_phi": f"{np.count_nonzero(ms.material_ids) / ms.material_ids.size:.5f}",
+            "iterations": "/".join(str(i) for i in res.iterations), "wall_s": f"{wall:.1f}"}
+
+
+def load_rows() -> list[dict]:
+    if not CSV_PATH.exists():
+        return []
+    with CSV_PATH.open(newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+def append_row(row: dict) -> None:
+    new = not CSV_PATH.exists()
+    with CSV_PATH.open("a", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=FIELDS)
+        if new:
+            w.writeheader()
+        w.writerow(row)
+
+
+def extrapolate(h: list[float], k: list[float]) -> tuple[float, float]:
+    """k_0 and p of k = k_0 + c h^p from the three finest grids (h sorted decreasing)."""
+    if len(h) < 2:
+        return math.nan, math.nan
+    if len(h) >= 3:
+        (h1, k1), (h2, k2), (h3, k3) = zip(h[-3:], k[-3:])
+        d1, d2 = k1 - k2, k2 - k3
+        # solve (h1^p - h2^p) / (h2^p - h3^p) = d1 / d2 for p by bisection
+        p = math.nan
+        if d1 * d2 > 0:
+            def g(q):
+                return (h1 ** q - h2 ** q) / (h2 ** q - h3 ** q) - d1 / d2
+            lo, hi = 0.05, 6.0
+            if g(lo) * g(hi) < 0:
+                for _ in range(100):
+                    mid = 0.5 * (lo + hi)
+                    if g(lo) * g(mid) <= 0:
+                        hi = mid
+                    else:
+                        lo = mid
+                p = 0.5 * (lo + hi)
+        if not (math.isfinite(p) and 0.5 <= p <= 3.0):
+            p_used = 1.0
+        else:
+            p_used = p
+    else:
+        p, p_used = math.nan, 1.0
+    (ha, ka), (hb, kb) = (h[-2], k[-2]), (h[-1], k[-1])
+    k0 = kb + (kb - ka) * hb ** p_used / (ha ** p_used - hb ** p_used)
+    return k0, p
+
+
+def write_report(rows: list[dict]) -> None:
+    L = ["# Voxel-size study on a dense random RVE (issue 5)\n",
+         "Generated by `validation/resolution_study.py` from `validation/results/resolution.csv`."
+         f" 60 vol% Al2O3 (lognormal mu = 1.02, sigma = 0.35), k = {K_AL2O3:g} / {K_SILICONE:g}"
+         f" W/(m K), R_fp = {R_FP:g} m^2K/W, R_ff = 2e-7 m^2K/W (paper Table 5) or R_ff = 0. "
+         f"FFT solver, tol = {TOL:g}, three load cases, k_iso = trace(K)/3, staircase "
+         "correction on.\n",
+         f"**Box:** {BOX_UM:g} um instead of the paper's 40 um: at 0.1 um the 40 um box would be "
+         f"400^3 voxels (~6.7 GB and hours on this 2-core machine); {BOX_UM:g} um gives "
+         f"{int(BOX_UM / 0.1)}^3 at 0.1 um. Same size distribution; to keep the coarse tail the "
+         f"diameter cut is box x {BOX_RATIO} = {BOX_UM * BOX_RATIO:.2f} um (removes 2.7 % of the "
+         "filler volume, versus 21 % with the default box/3 cut). The particle table of each "
+         "seed is generated once (at the coarsest voxel, so the smallest particle, 0.8 um, "
+         "spans 2 voxels at 0.4 um) and re-voxelized at every voxel size: only the "
+         "discretization changes between rows. A 16 um box is a small RVE (about 130 "
+         "particles): its k_eff differs from a 40 um box's by the RVE-size scatter, but the "
+         "*relative* discretization error, which is what this study measures, is a local "
+         "property (voxels per particle diameter, voxels per gap) and carries over.\n",
+         "**Extrapolation:** k(h) = k_0 + c h^p through the three finest voxel sizes (Richardson "
+         "with the observed order p; p = 1 when the three points do not give 0.5 <= p <= 3). "
+         "`dev` = k(h)/k_0 - 1.\n"]
+    data: dict = {}
+    for r in rows:
+        data.setdefault((int(r["seed"]), r["config"]), []).append(r)
+    worst_by_h: dict = {}
+    for (seed, cfg), rs in sorted(data.items()):
+        rs.sort(key=lambda r: -float(r["voxel_um"]))
+        h = [float(r["voxel_um"]) for r in rs]
+        kiso = [float(r["k_iso"]) for r in rs]
+        k0, p = extrapolate(h, kiso)
+        kx0, px = extrapolate(h, [float(r["k_xx"]) for r in rs])
+        L.append(f"## seed {seed}, {cfg}\n")
+        L.append(f"Extrapolated k_iso,0 = {k0:.4f} W/(m K) (observed order p = {p:.2f}); "
+                 f"k_xx,0 = {kx0:.4f} (p = {px:.2f}).\n")
+        L.append("| voxel (um) | n | voxel phi | k_xx | k_yy | k_zz | k_iso | dev k_iso (%) | "
+                 "iterations | wall (s) |")
+        L.append("| --- " * 10 + "|")
+        for r, hh, kk in zip(rs, h, kiso):
+            dev = kk / k0 - 1 if math.isfinite(k0) else math.nan
+            worst_by_h.setdefault(hh, []).append(abs(dev))
+            L.append(f"| {hh:g} | {r['n']} | {r['voxel_phi']} | {float(r['k_xx']):.4f} | "
+                     f"{float(r['k_yy']):.4f} | {float(r['k_zz']):.4f} | {kk:.4f} | "
+                     f"{100 * dev:+.2f} | {r['iterations']} | {r['wall_s']} |")
+        L.append("")
+    if worst_by_h:
+        L.append("## Recommendation\n")
+        L.append("| voxel (um) | max over seeds and configurations of abs(dev k_iso) (%) | "
+                 "configurations |")
+        L.append("| --- | --- | --- |")
+        ok = []
+        for hh in sorted(worst_by_h, reverse=True):
+            w = max(worst_by_h[hh])
+            L.append(f"| {hh:g} | {100 * w:.2f} | {len(worst_by_h[hh])} |")
+            if w <= 0.02:
+                ok.append(hh)
+        L.append("")
+        # largest voxel such that it and every finer voxel are within 2 %
+        rec = None
+        for hh in sorted(worst_by_h):
+            if max(worst_by_h[hh]) <= 0.02:
+                rec = hh
+            else:
+                break
+        if rec is not None:
+            L.append(f"**Recommended voxel size: {rec:g} um** (about "
+                     f"{0.8 / rec:.0f} voxels across the smallest, {2 * math.exp(1.02) / rec:.0f} "
+                     "across a median-number particle of 2.8 um) -- the largest voxel for which "
+                     "this and every finer voxel give k_iso within 2 % of the extrapolated value "
+                     "in every configuration studied.\n")
+        else:
+            L.append("No voxel size studied is within 2 % of the extrapolated value in every "
+                     "configuration.\n")
+    MD_PATH.write_text("\n".join(L) + "\n")
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--seeds", type=int, nargs="+", default=[1])
+    ap.add_argument("--voxels", type=float, nargs="+", default=list(VOXELS_UM))
+    ap.add_argument("--report-only", action="store_true")
+    ap.add_argument("--max-minutes", type=float, default=25.0)
+    args = ap.parse_args(argv)
+    RESULTS.mkdir(parents=True, exist_ok=True)
+    if not args.report_only:
+        done = {(int(r["seed"]), r["config"], float(r["voxel_um"])) for r in load_rows()}
+        t0 = time.perf_counter()
+        todo = [(s, c, v) for s in args.seeds for v in sorted(args.voxels, reverse=True)
+                for c in CONFIGS if (s, c, v) not in done]
+        print(f"{len(done)} done, {len(todo)} to run", flush=True)
+        for s, c, v in todo:
+            if time.perf_counter() - t0 > 60 * args.max_minutes:
+                print("time limit reached; re-run to continue", flush=True)
+                break
+            row = solve(s, c, v)
+            append_row(row)
+            print(row, flush=True)
+            write_report(load_rows())
+    write_report(load_rows())
+    print(f"wrote {MD_PATH}", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
