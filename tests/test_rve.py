@@ -228,7 +228,7 @@ def test_render_particles(tmp_path):
     assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 3000
 
 
-# ------------------------------------------------------------------ acceptance (slow)
+# ------------------------------------------------------------------ acceptance (40 um box, ~12 s)
 ACCEPTANCE = [
     ("Al2O3-55", [("Al2O3", 0.55)]),
     ("Al2O3-60", [("Al2O3", 0.60)]),
@@ -239,7 +239,6 @@ ACCEPTANCE = [
 ]
 
 
-@pytest.mark.slow
 @pytest.mark.parametrize("name, fill", ACCEPTANCE, ids=[a[0] for a in ACCEPTANCE])
 def test_acceptance_40um(name, fill):
     specs = [FillerSpec.from_table1(m, f) for m, f in fill]
