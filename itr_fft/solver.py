@@ -95,8 +95,10 @@ class _Preconditioner:
     """z = P (g_ref L)^+ P r with real FFTs; P removes cluster means when there are several."""
 
     def __init__(self, shape: tuple[int, int, int], g_ref: float, workers: int,
-                 labels_flat: np.ndarray | None, counts: np.ndarray | None) -> None:
+                 labels_flat: np.ndarray | None, counts: np.ndarray | None,
+                 fft_dtype: np.dtype) -> None:
         self.shape = shape
+        self.fft_dtype = fft_dtype
         self.s = [K.laplacian_symbol(n) for n in shape]
         self.inv_gref = 1.0 / g_ref
         self.workers = workers
@@ -104,13 +106,13 @@ class _Preconditioner:
         self.counts = counts
 
     def __call__(self, r: np.ndarray) -> tuple[np.ndarray, float]:
-        rhat = scipy.fft.rfftn(r, workers=self.workers)
+        r_in = r if r.dtype == self.fft_dtype else r.astype(self.fft_dtype)
+        rhat = scipy.fft.rfftn(r_in, workers=self.workers)
+        del r_in
         rz = K.spectral_solve(rhat, self.s[0], self.s[1], self.s[2], self.shape[2],
                               self.inv_gref)
         z = scipy.fft.irfftn(rhat, s=self.shape, workers=self.workers, overwrite_x=True)
         del rhat
-        if z.dtype != r.dtype:  # pragma: no cover - scipy keeps the precision
-            z = z.astype(r.dtype)
         if self.labels_flat is not None:
             K.project_clusters(z, self.labels_flat, self.counts)
         return z, rz
@@ -151,7 +153,7 @@ def _pcg(g: np.ndarray, d: int, h: float, x: np.ndarray, M: _Preconditioner, tol
         if labels_flat is not None:
             K.project_clusters(r, labels_flat, counts)
         z, rz = M(r)
-        p = z
+        p = z.astype(x.dtype)  # the search direction keeps the CG precision
         del z
         rec = true_res
         while it < maxiter:
@@ -191,8 +193,8 @@ def homogenize(ms: Microstructure, mat: Materials, tol: float = 1e-8,
                staircase: bool = True, callback: Callback | None = None,
                x0: np.ndarray | None = None, strict: bool = True, store_fields: bool = True,
                geometry: FaceGeometry | None = None, *, dtype: type = np.float64,
-               workers: int | None = None,
-               reference: str | float = "geometric") -> HomogenizationResult:
+               workers: int | None = None, reference: str | float = "geometric",
+               fft_dtype: type = np.float32) -> HomogenizationResult:
     """Effective conductivity tensor by FFT-preconditioned CG (same system as itr_fv).
 
     Parameters
@@ -233,6 +235,12 @@ def homogenize(ms: Microstructure, mat: Materials, tol: float = 1e-8,
     reference : str or float
         Reference face conductance of the preconditioner (see
         :func:`reference_conductance`); does not change the iteration count.
+    fft_dtype : np.float32 or np.float64
+        Precision of the preconditioner's FFTs only. The preconditioner is an approximation
+        of A^-1 anyway: applying the exact Laplacian inverse in float32 leaves the CG
+        vectors, the operator, the residual check and hence the converged answer in
+        ``dtype``, gives the same iteration counts (measured to tol = 1e-10) and costs
+        2.6x less FFT time at 128^3. Use float64 to apply it to double precision.
 
     Returns
     -------
@@ -265,7 +273,12 @@ def homogenize(ms: Microstructure, mat: Materials, tol: float = 1e-8,
         labels_flat = np.ascontiguousarray(labels.ravel(), dtype=np.int32)
         counts = np.bincount(labels_flat).astype(np.float64)
     g_ref = reference_conductance(g, reference)
-    M = _Preconditioner(ms.shape, g_ref, workers, labels_flat, counts)
+    fdt = np.dtype(fft_dtype)
+    if fdt not in (np.dtype(np.float64), np.dtype(np.float32)):
+        raise ValueError(f"fft_dtype: expected numpy.float64 or numpy.float32, got {fft_dtype!r}")
+    if dt == np.float32:
+        fdt = dt
+    M = _Preconditioner(ms.shape, g_ref, workers, labels_flat, counts, fdt)
     h = ms.voxel_m
     setup = time.perf_counter() - t0
     records = []
@@ -282,7 +295,8 @@ def homogenize(ms: Microstructure, mat: Materials, tol: float = 1e-8,
             records.append(SolveRecord(d, theta, it, history, res, time.perf_counter() - t1))
     finally:
         numba.set_num_threads(old_threads)
-    info = {"g_ref": g_ref, "k_ref": g_ref * h, "dtype": dt.name, "workers": workers,
+    info = {"g_ref": g_ref, "k_ref": g_ref * h, "dtype": dt.name, "fft_dtype": fdt.name,
+            "workers": workers,
             "unknowns": int(np.prod(ms.shape)),
             "interface_faces": geometry.n_interface_faces, "staircase": geometry.staircase}
     return build_result(ms, g, records, labels, floating, tol, setup,
