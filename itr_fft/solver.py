@@ -35,10 +35,16 @@ import scipy.fft
 
 from itr_fv.materials import Materials
 from itr_fv.microstructure import Microstructure
-from itr_fv.model import FaceGeometry, face_geometry
+from itr_fv.model import FaceGeometry
 from itr_fv.result import HomogenizationResult
-from itr_fv.solver_common import (Callback, SolveRecord, build_result, check_solver_args,
-                                  check_x0, floating_clusters)
+from itr_fv.solver_common import (
+    Callback,
+    SolveRecord,
+    build_result,
+    check_solver_args,
+    check_x0,
+    discrete_problem,
+)
 
 from . import _kernels as K
 
@@ -262,12 +268,7 @@ def homogenize(ms: Microstructure, mat: Materials, tol: float = 1e-8,
         raise ValueError(f"workers: expected a positive integer, got {workers!r}")
     workers = int(min(workers, numba.config.NUMBA_NUM_THREADS, os.cpu_count() or 1))
     x0 = check_x0(x0, ms.shape, dirs)
-    if geometry is None:
-        geometry = face_geometry(ms, staircase)
-    elif not isinstance(geometry, FaceGeometry) or geometry.shape != ms.shape:
-        raise ValueError("geometry: expected the FaceGeometry of this microstructure")
-    g = geometry.conductances(mat)
-    floating, labels = floating_clusters(g)
+    geometry, g, floating, labels = discrete_problem(ms, mat, staircase, geometry)
     labels_flat = counts = None
     if labels is not None:
         labels_flat = np.ascontiguousarray(labels.ravel(), dtype=np.int32)
@@ -282,7 +283,6 @@ def homogenize(ms: Microstructure, mat: Materials, tol: float = 1e-8,
     h = ms.voxel_m
     setup = time.perf_counter() - t0
     records = []
-    restarts_total = 0
     old_threads = numba.get_num_threads()
     numba.set_num_threads(workers)
     try:

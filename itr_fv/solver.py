@@ -12,7 +12,7 @@ import scipy.sparse
 
 from .materials import Materials
 from .microstructure import Microstructure
-from .model import FaceGeometry, face_geometry, load_vector
+from .model import FaceGeometry, load_vector
 from .result import HomogenizationResult
 from .solver_common import (
     Callback,
@@ -20,7 +20,7 @@ from .solver_common import (
     build_result,
     check_solver_args,
     check_x0,
-    floating_clusters,
+    discrete_problem,
 )
 
 __all__ = ["homogenize", "assemble_operator"]
@@ -152,12 +152,7 @@ def homogenize(ms: Microstructure, mat: Materials, tol: float = 1e-8,
     if amg not in _AMG:
         raise ValueError(f"amg: expected one of {sorted(_AMG)}, got {amg!r}")
     x0 = check_x0(x0, ms.shape, dirs)
-    if geometry is None:
-        geometry = face_geometry(ms, staircase)
-    elif not isinstance(geometry, FaceGeometry) or geometry.shape != ms.shape:
-        raise ValueError("geometry: expected the FaceGeometry of this microstructure")
-    g = geometry.conductances(mat)
-    floating, labels = floating_clusters(g)
+    geometry, g, floating, labels = discrete_problem(ms, mat, staircase, geometry)
     if labels is None:
         pins = np.array([0])
     else:

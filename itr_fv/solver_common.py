@@ -16,15 +16,18 @@ import numpy as np
 from .materials import Materials
 from .microstructure import Microstructure
 from .model import (
+    FaceGeometry,
     cell_centres,
     connected_components,
     energy_tensor,
     face_fluxes,
+    face_geometry,
     mean_flux,
 )
 from .result import ConvergenceError, FloatingClusters, HomogenizationResult
 
-__all__ = ["check_solver_args", "check_x0", "SolveRecord", "build_result", "floating_clusters"]
+__all__ = ["check_solver_args", "check_x0", "discrete_problem", "SolveRecord", "build_result",
+           "floating_clusters"]
 
 Callback = Callable[[int, int, float], None]
 
@@ -87,6 +90,20 @@ def floating_clusters(g: np.ndarray) -> tuple[FloatingClusters, np.ndarray | Non
         return FloatingClusters(0, np.zeros(0, dtype=np.int64), 0.0), None
     sizes = np.bincount(labels.ravel(), minlength=n)
     return FloatingClusters(n - 1, sizes[1:], float(sizes[1:].sum() / labels.size)), labels
+
+
+def discrete_problem(ms: Microstructure, mat: Materials, staircase: bool,
+                     geometry: FaceGeometry | None
+                     ) -> tuple[FaceGeometry, np.ndarray, FloatingClusters, np.ndarray | None]:
+    """The system both solvers solve: geometry (reused if given), face conductances g
+    (W/(m^2 K)) and the clusters cut off by insulating faces (labels, or None if none)."""
+    if geometry is None:
+        geometry = face_geometry(ms, staircase)
+    elif not isinstance(geometry, FaceGeometry) or geometry.shape != ms.shape:
+        raise ValueError("geometry: expected the FaceGeometry of this microstructure")
+    g = geometry.conductances(mat)
+    floating, labels = floating_clusters(g)
+    return geometry, g, floating, labels
 
 
 def remove_cluster_means(theta: np.ndarray, labels: np.ndarray | None) -> np.ndarray:
