@@ -16,7 +16,7 @@ nothing; a re-run skips the rows already there), and ``convergence.md`` + ``conv
 are rebuilt from the CSV.
 
 Run:
-    /work/venv/bin/python validation/convergence.py                # default plan (~30-40 min, 2 cores)
+    /work/venv/bin/python validation/convergence.py                # default plan (~25 min on 2 shared cores)
     /work/venv/bin/python validation/convergence.py --full         # the whole grid (hours)
     /work/venv/bin/python validation/convergence.py --report-only  # rebuild md + png from the CSV
 """
@@ -145,6 +145,14 @@ def plan(full: bool) -> list[tuple]:
     for c in cases:
         if c[0] == "sc" and c[1] == 0.5:
             runs += [("fft_2x", *c, n, True) for n in (32, 48, 64)]
+    # 7. FFT 192 for every case with f <= 0.3 whose error at 128 exceeds the 0.5 % bound, and
+    #    for f >= 0.5 cases above 1 % (does it keep converging?)
+    for row in load_rows():
+        k = key_of(row)
+        if k[0] == "fft" and k[5] == 128 and k[6]:
+            e = abs(float(row["rel_err"]))
+            if (k[2] <= 0.3 and e > 0.005) or (k[2] >= 0.5 and e > 0.01):
+                runs.append(("fft", *k[1:5], 192, True))
     seen, out = set(), []
     for r in runs:
         if r not in seen:
@@ -237,6 +245,11 @@ def _fmt_err(e: float | None) -> str:
     return "" if e is None else f"{100 * e:+.3f}"
 
 
+def _fmt_diff(a: float, b: float) -> str:
+    d = abs(a / b - 1)
+    return "< 1e-10" if d < 1e-10 else f"{d:.1e}"   # the CSV keeps 10 significant digits
+
+
 def _case_label(lat, f, kr, al) -> str:
     return f"{lat} f={f:g} k={kr:g} a={al:g}"
 
@@ -266,7 +279,10 @@ def write_report(rows: list[dict], elapsed: float | None = None) -> None:
     L.append(f"Machine: {platform.machine()}, 2 cores shared with other jobs (timings are "
              "indicative only). Plan: default (not `--full`): FFT with the staircase correction "
              "for every case at n <= 96 and 128, FFT at 192 for a representative subset, "
-             "staircase off for alpha in {0.5, 2} at n <= 96, FV at n <= 64 for a subset.\n")
+             "staircase off for alpha in {0.5, 2} at n <= 96, FV at n <= 64 for a subset, "
+             "FFT at 192 also for every case over its acceptance bound at 128 (f <= 0.3: "
+             "0.5 %; f >= 0.5: 1 % taken as the trigger), SC f = 0.5 as a 2x2x2 supercell "
+             "at n <= 64.\n")
     if elapsed is not None:
         L.append(f"Rows: {len(rows)}; this run's solve time {elapsed / 60:.1f} min.\n")
 
@@ -342,6 +358,7 @@ def write_report(rows: list[dict], elapsed: float | None = None) -> None:
         L.append(f"FV vs FFT: {len(diffs)} common solves, max |k_FV / k_FFT - 1| = "
                  f"{max(diffs):.1e} (tol = {TOL:g}): both solvers have the same error curves.\n")
 
+    L.extend(_discussion(ser))
     # ---------------- per lattice tables
     ns_all = SIZES["fft"]
     for st in (True, False):
@@ -416,10 +433,81 @@ def write_report(rows: list[dict], elapsed: float | None = None) -> None:
                     j = other[0].index(n)
                     L.append(f"| {k[2]} | {k[3]:g} | {k[4]:g} | {k[5]:g} | "
                              f"{'on' if k[1] else 'off'} | {n} | {_fmt_err(v[2][i])} | "
-                             f"{_fmt_err(other[2][j])} | {abs(v[1][i] / other[1][j] - 1):.1e} | "
+                             f"{_fmt_err(other[2][j])} | {_fmt_diff(v[1][i], other[1][j])} | "
                              f"{v[5][i]:.2f} | {other[5][j]:.2f} |")
         L.append("")
     MD_PATH.write_text("\n".join(L) + "\n")
+
+
+def _radius(lattice: str, f: float) -> float:
+    """Sphere radius / cell edge."""
+    return (3.0 * f / (4.0 * math.pi * len(SITES[lattice]))) ** (1.0 / 3.0)
+
+
+def _gap(lattice: str, f: float) -> float:
+    """Surface gap between nearest neighbours / cell edge."""
+    d = {"sc": 1.0, "bcc": math.sqrt(3) / 2, "fcc": math.sqrt(2) / 2}[lattice]
+    return d - 2 * _radius(lattice, f)
+
+
+def _discussion(ser: dict) -> list[str]:
+    """Cases over the acceptance bound at 128 and what the finer grid says; order; Richardson."""
+    out = ["## Discussion\n"]
+    rows = []
+    for k, v in ser.items():
+        if k[0] != "fft" or not k[1] or 128 not in v[0]:
+            continue
+        f = k[3]
+        e128 = v[2][v[0].index(128)]
+        bound = 0.005 if f <= 0.3 else 0.02
+        if abs(e128) > bound or (f >= 0.5 and abs(e128) > 0.01):
+            e192 = v[2][v[0].index(192)] if 192 in v[0] else None
+            rows.append((k, e128, e192, bound))
+    if rows:
+        out.append("Cases over their bound at 128 (f <= 0.3: 0.5 %, f >= 0.5: 2 %), and f >= 0.5 "
+                   "cases above 1 %, with the 192 point:\n")
+        out.append("| case | err 128 (%) | err 192 (%) | bound (%) | a/h at 128 | gap/h at 128 |")
+        out.append("| --- | --- | --- | --- | --- | --- |")
+        for k, e128, e192, b in sorted(rows, key=lambda r: -abs(r[1])):
+            out.append(f"| {_case_label(*k[2:])} | {100 * e128:+.3f} | "
+                       f"{'' if e192 is None else f'{100 * e192:+.3f}'} | {100 * b:g} | "
+                       f"{128 * _radius(k[2], k[3]):.1f} | {128 * _gap(k[2], k[3]):.1f} |")
+        out.append("")
+    out.append(
+        "Two kinds of hard case:\n\n"
+        "- **Resistive interfaces on small spheres** (alpha = 2, and alpha = 0.5 on FCC): the "
+        "error is negative (k too low: the voxelized interface carries slightly too much "
+        "resistance) and decays like h/a, first order, so it is largest where a sphere has "
+        "the fewest voxels per radius -- FCC (4 spheres per cell, a = 0.26 L at f = 0.3, "
+        "33 voxels per radius at n = 128) before BCC (0.33 L) and SC (0.42 L). These are the "
+        "f <= 0.3 cases over 0.5 % at 128; at 192 they are below it.\n"
+        "- **Near-touching spheres with conducting particles and no ITR** (k_p/k_m = 170, "
+        "alpha = 0 at f = 0.5 / 0.6): the flux concentrates in the thin matrix gap between "
+        "neighbours (SC f = 0.5: gap 0.015 L = 1.9 voxels at n = 128; FCC f = 0.6: 0.048 L; "
+        "BCC f = 0.5: 0.085 L), whose voxel representation changes in steps with n, so the "
+        "error is positive and jumps non-monotonically (SC f = 0.5: see the table) rather "
+        "than decaying smoothly. With an ITR (alpha > 0) the gap matters far less and these "
+        "cases converge like the others.\n")
+    errs_f, errs_r = [], []
+    for k, v in ser.items():
+        if k[0] != "fft" or not k[1]:
+            continue
+        cn, ck, ce = clean(k[2], k[3], v[0], v[1], v[2])
+        if len(cn) < 3:
+            continue
+        p, sc = observed_order(cn, ce)
+        pr = p if (math.isfinite(p) and 0.5 <= p <= 4 and not sc) else 1.0
+        errs_f.append(abs(ce[-1]))
+        errs_r.append(abs(richardson(cn, ck, pr) / v[3] - 1))
+    if errs_f:
+        out.append(
+            f"Richardson extrapolation (two finest grids, observed order): median |err| "
+            f"{100 * np.median(errs_r):.3f} % against {100 * np.median(errs_f):.3f} % on the "
+            f"finest grid ({len(errs_f)} case series; better in "
+            f"{sum(r < f for r, f in zip(errs_r, errs_f))}). It helps on smooth first-order "
+            "series and can hurt where the error jitters (sign changes, near-touching "
+            "spheres).\n")
+    return out
 
 
 def _voxel_f(rows, k, n) -> str:
@@ -491,13 +579,16 @@ def make_plots(rows: list[dict]) -> None:
                         v = ser.get(("fft", st, lat, f, kr, al))
                         if not v or len(v[0]) < 2:
                             continue
-                        n = [x for x in v[0] if x <= 96]
+                        n = [x for x in v[0] if x <= 96 and not self_contact(lat, f, x)]
                         e = [abs(v[2][v[0].index(x)]) for x in n]
                         ax.loglog(n, np.maximum(e, 1e-7), "-" if st else "--",
                                   color=colors[al] if st else "0.5", lw=0.7,
                                   marker="o" if st else "s", ms=2.5)
         ax.set_title(f"{lat.upper()}: alpha 0.5 (green), 2 (red) on; grey dashed: off",
                      fontsize=8)
+        if lat == "sc":
+            ax.text(0.02, 0.02, "SC f=0.5: n<=64 left out (self-contact)", fontsize=6,
+                    transform=ax.transAxes)
         ax.set_xlabel("n", fontsize=8)
         ax.set_xticks([32, 48, 64, 96])
         ax.set_xticklabels(["32", "48", "64", "96"], fontsize=7)
