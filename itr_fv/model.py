@@ -146,6 +146,28 @@ def _staircase_factor(n: np.ndarray) -> np.ndarray:
     return s
 
 
+def _self_image_faces(table, pid: np.ndarray, pq: np.ndarray, d: int,
+                      shape: tuple[int, int, int], h: float) -> np.ndarray:
+    """Flat indices of axis-d faces where a sphere meets its own periodic image.
+
+    Both voxels carry the same particle id, but they lie in different periodic images of
+    the sphere (their minimum-image offsets from its centre differ by the box length, not
+    by h). Only spheres whose diameter comes within two voxels of the box edge can do this.
+    """
+    L = shape[d] * h
+    big = np.flatnonzero(2.0 * table.radii_m > L - 2.0 * h) + 1
+    if big.size == 0:
+        return np.zeros(0, dtype=np.int64)
+    cand = np.flatnonzero((np.isin(pid, big) & (pid == pq)).ravel())
+    if cand.size == 0:
+        return cand
+    i_d = np.unravel_index(cand, shape)[d]
+    c = table.centers_m[pid.ravel()[cand] - 1, d]
+    u_p = _min_image((i_d + 0.5) * h - c, np.array(L))
+    u_q = _min_image((i_d + 1.5) * h - c, np.array(L))
+    return cand[np.abs(u_q - u_p - h) > 0.5 * h]
+
+
 def face_geometry(ms: Microstructure, staircase: bool = True,
                   image_smoothing: float = 1.5) -> FaceGeometry:
     """Find the interface faces of ``ms`` and their staircase factors.
@@ -160,7 +182,10 @@ def face_geometry(ms: Microstructure, staircase: bool = True,
         face, along the (minimum-image) line of centres at a particle-particle face. For
         a plain label image (no table) n is estimated from the gradient of the solid
         indicator smoothed by a periodic Gaussian of ``image_smoothing`` voxels at
-        particle-matrix faces, and s = 1 is kept at particle-particle faces.
+        particle-matrix faces, and s = 1 is kept at particle-particle faces. With a
+        particle table, a sphere that meets its own periodic image (diameter within two
+        voxels of the box) gets contact resistance there too, with s = 1; a plain label
+        image cannot tell this apart from the inside of the particle.
     image_smoothing : float
         Gaussian width (voxels) of the image-based normal estimate.
 
@@ -184,6 +209,8 @@ def face_geometry(ms: Microstructure, staircase: bool = True,
     for d in range(3):
         pq = np.roll(pid, -1, axis=d)
         idx = np.flatnonzero((pid != pq).ravel())
+        if table is not None:
+            idx = np.union1d(idx, _self_image_faces(table, pid, pq, d, shape, h))
         p_lo = pid.ravel()[idx]
         p_hi = pq.ravel()[idx]
         index.append(idx)
@@ -192,6 +219,8 @@ def face_geometry(ms: Microstructure, staircase: bool = True,
         is_contact = (p_lo > 0) & (p_hi > 0)
         contact.append(is_contact)
         s = np.ones(idx.size)
+        # a sphere touching its own periodic image: the line of centres is e_d, s = 1
+        self_image = is_contact & (p_lo == p_hi)
         if mode == "spheres" and idx.size:
             ijk = np.stack(np.unravel_index(idx, shape), axis=1).astype(np.float64)
             x_face = (ijk + 0.5) * h
@@ -200,11 +229,12 @@ def face_geometry(ms: Microstructure, staircase: bool = True,
             part = np.maximum(p_lo, p_hi)[pm] - 1
             n_pm = _min_image(x_face[pm] - table.centers_m[part], box)
             s[pm] = _staircase_factor(n_pm)
-            if is_contact.any():
-                a = p_lo[is_contact] - 1
-                b = p_hi[is_contact] - 1
+            pp = is_contact & ~self_image
+            if pp.any():
+                a = p_lo[pp] - 1
+                b = p_hi[pp] - 1
                 n_pp = _min_image(table.centers_m[b] - table.centers_m[a], box)
-                s[is_contact] = _staircase_factor(n_pp)
+                s[pp] = _staircase_factor(n_pp)
         elif mode == "image" and idx.size:
             pm = np.flatnonzero(~is_contact)
             p_flat = idx[pm]

@@ -90,3 +90,26 @@ def test_label_image_staircase_estimate_close_to_analytic_normals():
     assert image.info["staircase"] == "image"
     assert image.k_eff[0, 0] == pytest.approx(analytic, rel=0.005)
     assert image.k_eff[0, 0] == pytest.approx(SC_ALPHA_05, rel=0.01)
+
+
+def test_sphere_touching_its_own_image_gets_contact_resistance():
+    """One-sphere SC cell at f = 0.5 on a coarse grid: the voxelized sphere bridges the
+    0.015 L gap to its own periodic image. That bridge is a contact between two spheres
+    and must carry R(p, p), exactly as in the 2 x 2 x 2 supercell with 8 distinct ids."""
+    from itr_fv import Microstructure
+    f, L = 0.5, 1.0
+    a = radius(f) * L
+    mat = Materials({"matrix": 1.0, "filler": 170.0},
+                    {("filler", "matrix"): 2.0 * a, ("filler", "filler"): 2.0 * a}, "matrix")
+    one = Microstructure.from_spheres(np.full((1, 3), 0.5 * L), np.array([a]), "filler",
+                                      box_m=L, shape=24, matrix="matrix")
+    c = np.array([[i, j, k] for i in range(2) for j in range(2) for k in range(2)]) * L + 0.5 * L
+    eight = Microstructure.from_spheres(c, np.full(8, a), "filler", box_m=2 * L, shape=48,
+                                        matrix="matrix")
+    np.testing.assert_array_equal(eight.material_ids[:24, :24, :24], one.material_ids)
+    k1 = homogenize(one, mat, tol=1e-10, directions=(0,)).k_eff[0, 0]
+    k8 = homogenize(eight, mat, tol=1e-10, directions=(0,)).k_eff[0, 0]
+    assert k1 == pytest.approx(k8, rel=1e-7)
+    # the resistive bridges keep it near the multipole value 0.72252 (alpha = 2), far from
+    # the perfectly conducting bridge (several times larger)
+    assert k1 < 1.0
