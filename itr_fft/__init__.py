@@ -17,7 +17,7 @@ import os as _os
 _os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 from .auto import choose_solver, homogenize_auto
-from .solver import FLOAT32_MIN_TOL, homogenize, reference_conductance
+from .solver import FLOAT32_MIN_TOL, float32_min_tol, homogenize, reference_conductance
 
 __all__ = ["homogenize", "choose_solver", "homogenize_auto", "reference_conductance",
-           "FLOAT32_MIN_TOL"]
+           "FLOAT32_MIN_TOL", "float32_min_tol"]
