@@ -40,6 +40,16 @@ __all__ = ["PackingResult", "pack_spheres", "pairs_within_gap", "check_overlaps"
 
 
 # --------------------------------------------------------------------------- kernels
+@njit(cache=True, inline="always")
+def _min_image(dx, L, half):
+    """Minimum-image component of a difference dx in a periodic box of edge L."""
+    if dx > half:
+        return dx - L
+    if dx < -half:
+        return dx + L
+    return dx
+
+
 @njit(cache=True)
 def _wrap(pos, L):
     n = pos.shape[0]
@@ -116,21 +126,9 @@ def _pairs(pos, R, L, extra, cap_i, cap_j):
                     j = head[(ax * nc + by) * nc + cz2]
                     while j >= 0:
                         if j > i:
-                            dx = pos[j, 0] - pos[i, 0]
-                            dy = pos[j, 1] - pos[i, 1]
-                            dz = pos[j, 2] - pos[i, 2]
-                            if dx > half:
-                                dx -= L
-                            elif dx < -half:
-                                dx += L
-                            if dy > half:
-                                dy -= L
-                            elif dy < -half:
-                                dy += L
-                            if dz > half:
-                                dz -= L
-                            elif dz < -half:
-                                dz += L
+                            dx = _min_image(pos[j, 0] - pos[i, 0], L, half)
+                            dy = _min_image(pos[j, 1] - pos[i, 1], L, half)
+                            dz = _min_image(pos[j, 2] - pos[i, 2], L, half)
                             cut = R[i] + R[j] + extra
                             if dx * dx + dy * dy + dz * dz < cut * cut:
                                 if cnt < cap:
@@ -196,21 +194,9 @@ def _pack_kernel(pos, R, L, s_start, s_end, growth0, alpha, tol_final, grow_tol,
         for p in range(npair):
             i = pi[p]
             j = pj[p]
-            dx = pos[j, 0] - pos[i, 0]
-            dy = pos[j, 1] - pos[i, 1]
-            dz = pos[j, 2] - pos[i, 2]
-            if dx > half:
-                dx -= L
-            elif dx < -half:
-                dx += L
-            if dy > half:
-                dy -= L
-            elif dy < -half:
-                dy += L
-            if dz > half:
-                dz -= L
-            elif dz < -half:
-                dz += L
+            dx = _min_image(pos[j, 0] - pos[i, 0], L, half)
+            dy = _min_image(pos[j, 1] - pos[i, 1], L, half)
+            dz = _min_image(pos[j, 2] - pos[i, 2], L, half)
             sig = s * (R[i] + R[j])
             d2 = dx * dx + dy * dy + dz * dz
             if d2 >= sig * sig:
@@ -289,21 +275,9 @@ def _gap_pairs(pos, r, L, gap):
     for p in range(cnt):
         i = pi[p]
         j = pj[p]
-        dx = pos[j, 0] - pos[i, 0]
-        dy = pos[j, 1] - pos[i, 1]
-        dz = pos[j, 2] - pos[i, 2]
-        if dx > half:
-            dx -= L
-        elif dx < -half:
-            dx += L
-        if dy > half:
-            dy -= L
-        elif dy < -half:
-            dy += L
-        if dz > half:
-            dz -= L
-        elif dz < -half:
-            dz += L
+        dx = _min_image(pos[j, 0] - pos[i, 0], L, half)
+        dy = _min_image(pos[j, 1] - pos[i, 1], L, half)
+        dz = _min_image(pos[j, 2] - pos[i, 2], L, half)
         g[p] = math.sqrt(dx * dx + dy * dy + dz * dz) - r[i] - r[j]
     return pi[:cnt].copy(), pj[:cnt].copy(), g
 

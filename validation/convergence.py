@@ -24,15 +24,18 @@ Run:
 from __future__ import annotations
 
 import argparse
-import csv
 import math
 import platform
+import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
 from itr_fv import Materials, Microstructure, analytic
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from validation import csv_store  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
 CSV_PATH = RESULTS / "convergence.csv"
@@ -167,20 +170,11 @@ def key_of(row: dict) -> tuple:
 
 
 def load_rows() -> list[dict]:
-    if not CSV_PATH.exists():
-        return []
-    with CSV_PATH.open(newline="") as fh:
-        return list(csv.DictReader(fh))
+    return csv_store.load_rows(CSV_PATH)
 
 
 def append_row(row: dict) -> None:
-    new = not CSV_PATH.exists()
-    with CSV_PATH.open("a", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=FIELDS)
-        if new:
-            w.writeheader()
-        w.writerow(row)
-        fh.flush()
+    csv_store.append_row(CSV_PATH, FIELDS, row)
 
 
 # ------------------------------------------------------------------------------ analysis

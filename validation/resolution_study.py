@@ -32,8 +32,8 @@ The committed report came from (about 22 min of solves on 2 shared cores):
 from __future__ import annotations
 
 import argparse
-import csv
 import math
+import sys
 import time
 import warnings
 from pathlib import Path
@@ -41,6 +41,9 @@ from pathlib import Path
 import numpy as np
 
 from itr_fv import Materials, Microstructure
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from validation import csv_store  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
 CSV_PATH = RESULTS / "resolution.csv"
@@ -99,19 +102,11 @@ def solve(seed: int, config: str, voxel_um: float) -> dict:
 
 
 def load_rows() -> list[dict]:
-    if not CSV_PATH.exists():
-        return []
-    with CSV_PATH.open(newline="") as fh:
-        return list(csv.DictReader(fh))
+    return csv_store.load_rows(CSV_PATH)
 
 
 def append_row(row: dict) -> None:
-    new = not CSV_PATH.exists()
-    with CSV_PATH.open("a", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=FIELDS)
-        if new:
-            w.writeheader()
-        w.writerow(row)
+    csv_store.append_row(CSV_PATH, FIELDS, row)
 
 
 def extrapolate(h: list[float], k: list[float]) -> tuple[float, float]:
