@@ -4,6 +4,14 @@ finite-volume solver (sparse assembly + pyamg-preconditioned CG).
 Public API::
 
     from itr_fv import Materials, Microstructure, homogenize
+    from itr_fv.rve import FillerSpec, generate_rve      # dense periodic packings
+    from itr_fv import analytic                          # exact / reference formulas
+
+Modules: ``materials`` (phases, resistances), ``microstructure`` (voxel images),
+``psd`` (lognormal size distributions), ``packing`` and ``rve`` (RVE generation),
+``model`` (the discrete model both solvers solve), ``solver`` (this reference solver),
+``solver_common`` and ``result`` (shared by both solvers), ``warm_start``, ``analytic``,
+``vtk_output`` and ``particle_render`` (pyvista output).
 """
 
 from .materials import Materials

@@ -261,8 +261,8 @@ def load_vector(g: np.ndarray, voxel_m: float, E: np.ndarray) -> np.ndarray:
     """Right-hand side b(E) of ``A theta = b`` for the macroscopic gradient load E.
 
     With T = -E.x + theta and the outgoing face flux g (T_p - T_q), conservation in voxel p
-    gives ``(A theta)_p = h * sum_d E_d (g_d[p - e_d] - g_d[p])`` (W/m^3 times h^3/h^2 ...
-    i.e. W/m^2 per unit E in K/m).
+    gives ``(A theta)_p = h * sum_d E_d (g_d[p - e_d] - g_d[p])``: a net flux density,
+    W/m^2 for E in K/m (every term of the balance is divided by the face area h^2).
 
     Parameters
     ----------
