@@ -3,8 +3,9 @@
 Every kernel loops once over the grid (``parallel=True`` over the first axis), reads each
 array once and accumulates its reduction in float64 (no fastmath: the CG scalars must not
 be reassociated differently between runs); reductions go through one partial sum per
-row of the first axis, so results do not depend on the thread count). Arrays are C-contiguous, shape (n1, n2, n3),
-float64 or float32 (one compiled specialisation per dtype, cached on disk).
+row of the first axis, so results do not depend on the thread count). Arrays are
+C-contiguous, shape (n1, n2, n3), float64 or float32 (one compiled specialisation per dtype,
+cached on disk).
 
 Layout convention (as in :mod:`itr_fv.model`): ``g[d][i, j, k]`` is the conductance per unit
 area (W/(m^2 K)) of the face between voxel (i, j, k) and its periodic neighbour + e_d, so

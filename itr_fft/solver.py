@@ -244,7 +244,8 @@ def homogenize(ms: Microstructure, mat: Materials, tol: float = 1e-8,
     dtype : np.float64 or np.float32
         Storage precision of the CG vectors and FFTs (reductions, conductances and the
         final residual stay float64). float32 halves vector memory and FFT time and needs
-        ``tol >= float32_min_tol(ms.shape)`` (1e-6 up to 63^3, growing like n^2); at tol = 3e-6 k_eff agrees with float64 to
+        ``tol >= float32_min_tol(ms.shape)`` (1e-6 up to 63^3, growing like n^2); at
+        tol = 3e-6 k_eff agrees with float64 to
         ~3e-7 of max |K| (diagonal ~3e-8; off-diagonals are first order in the residual).
     workers : int, optional
         Threads for the FFTs and the numba kernels (default: 1 below 40^3 voxels, else

@@ -58,7 +58,8 @@ class Materials:
             except (TypeError, ValueError):
                 raise ValueError(f"conductivity[{name!r}]: not a number: {value!r}") from None
             if not math.isfinite(v) or v <= 0.0:
-                raise ValueError(f"conductivity[{name!r}] must be finite and > 0 W/(m K), got {v!r}")
+                raise ValueError(f"conductivity[{name!r}] must be finite and > 0 W/(m K), "
+                                 f"got {v!r}")
             k[name] = v
         r: dict[frozenset, float] = {}
         for pair, value in (resistance or {}).items():
@@ -80,7 +81,8 @@ class Materials:
                 raise ValueError(f"resistance: pair {pair!r} given twice with different values")
             r[key] = v
         if not isinstance(matrix, str) or matrix not in k:
-            raise ValueError(f"matrix: {matrix!r} is not a phase of conductivity (known: {sorted(k)})")
+            raise ValueError(f"matrix: {matrix!r} is not a phase of conductivity "
+                             f"(known: {sorted(k)})")
         self._k = k
         self._r = r
         self.matrix = matrix

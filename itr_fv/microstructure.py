@@ -121,7 +121,8 @@ class Microstructure:
         mid = _int_labels(material_ids, "material_ids")
         pid = _int_labels(particle_ids, "particle_ids")
         if mid.shape != pid.shape:
-            raise ValueError(f"particle_ids: shape {pid.shape} differs from material_ids {mid.shape}")
+            raise ValueError(f"particle_ids: shape {pid.shape} differs from material_ids "
+                             f"{mid.shape}")
         h = _positive_length(voxel_m, "voxel_m")
         if isinstance(names, str) or not isinstance(names, Sequence) or len(names) < 1:
             raise ValueError("names: expected a sequence of phase names, names[0] the matrix")

@@ -195,7 +195,8 @@ def homogenize(ms: Microstructure, mat: Materials, tol: float = 1e-8,
             res = float(np.linalg.norm(b - Ap @ x)) / normb
         records.append(SolveRecord(d, x.reshape(ms.shape), len(history) - 1, history, res,
                                    time.perf_counter() - t1))
-    info = {"amg": amg, "amg_levels": len(ml.levels), "operator_complexity": float(ml.operator_complexity()),
+    info = {"amg": amg, "amg_levels": len(ml.levels),
+            "operator_complexity": float(ml.operator_complexity()),
             "unknowns": int(A.shape[0]), "interface_faces": geometry.n_interface_faces,
             "staircase": geometry.staircase}
     return build_result(ms, g, records, labels, floating, tol, setup,

@@ -116,7 +116,8 @@ def render_png(result: "HomogenizationResult", path: str | Path, load_case: int 
     pl.add_text("particles by material", font_size=10)
     solid = grid.threshold(0.5, scalars="particle_id")
     if solid.n_cells:
-        pl.add_mesh(solid.extract_surface(algorithm="dataset_surface"), scalars="material", cmap="Set1",
+        pl.add_mesh(solid.extract_surface(algorithm="dataset_surface"), scalars="material",
+                    cmap="Set1",
                     show_scalar_bar=False)
     pl.add_mesh(grid.outline(), color="black")
     pl.link_views()

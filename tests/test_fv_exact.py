@@ -88,7 +88,8 @@ def test_space_filling_cubes_with_contact_resistance(cube, R):
     n = 4 * cube
     h = 0.25e-6
     idx = np.arange(n) // cube
-    pid = (idx[:, None, None] * 16 + idx[None, :, None] * 4 + idx[None, None, :] + 1).astype(np.int32)
+    pid = idx[:, None, None] * 16 + idx[None, :, None] * 4 + idx[None, None, :] + 1
+    pid = pid.astype(np.int32)
     ms = Microstructure.from_labels(np.ones_like(pid), pid, h, ("silicone", "Al2O3"))
     mat = Materials({"silicone": 0.18, "Al2O3": 30.0}, {("Al2O3", "Al2O3"): R}, matrix="silicone")
     res = homogenize(ms, mat, tol=1e-12)

@@ -6,8 +6,16 @@ import numpy as np
 import pytest
 from scipy import integrate
 
-from itr_fv.psd import (TABLE1, LogNormalPSD, fit_histogram, fit_sample, fit_truncated_sample,
-                        histogram_from_sample, phi_rcp_lognormal, plot_histogram_fit)
+from itr_fv.psd import (
+    TABLE1,
+    LogNormalPSD,
+    fit_histogram,
+    fit_sample,
+    fit_truncated_sample,
+    histogram_from_sample,
+    phi_rcp_lognormal,
+    plot_histogram_fit,
+)
 
 
 def test_table1_mean_and_sd_eq2_eq3():

@@ -16,7 +16,7 @@ nothing; a re-run skips the rows already there), and ``convergence.md`` + ``conv
 are rebuilt from the CSV.
 
 Run:
-    /work/venv/bin/python validation/convergence.py                # default plan (~25 min on 2 shared cores)
+    python validation/convergence.py       # default plan (~25 min on 2 shared cores)
     /work/venv/bin/python validation/convergence.py --full         # the whole grid (hours)
     /work/venv/bin/python validation/convergence.py --report-only  # rebuild md + png from the CSV
 """
