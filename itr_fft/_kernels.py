@@ -127,16 +127,6 @@ def direction_update(p, z, beta):  # pragma: no cover - compiled
                 p[i, j, k] = z[i, j, k] + beta * p[i, j, k]
 
 
-@nb.njit(**_OPTS)
-def copy_into(dst, src):  # pragma: no cover - compiled
-    """dst[...] = src (parallel copy)."""
-    n1, n2, n3 = dst.shape
-    for i in nb.prange(n1):
-        for j in range(n2):
-            for k in range(n3):
-                dst[i, j, k] = src[i, j, k]
-
-
 @nb.njit(cache=True, nogil=True)
 def _spectral_row(row, sij, s3, n3, inv_gref):  # pragma: no cover - compiled
     m3 = row.shape[0]

@@ -74,18 +74,6 @@ class FaceGeometry:
     def n_interface_faces(self) -> int:
         return int(sum(a.size for a in self.index))
 
-    def required_pairs(self) -> set[tuple[str, str]]:
-        """Material pairs whose resistance the microstructure needs."""
-        pairs = set()
-        for d in range(3):
-            if self.index[d].size:
-                codes = np.unique(np.minimum(self.mat_lo[d], self.mat_hi[d]) * 65536
-                                  + np.maximum(self.mat_lo[d], self.mat_hi[d]))
-                for c in codes:
-                    a, b = divmod(int(c), 65536)
-                    pairs.add((self.names[a], self.names[b]))
-        return pairs
-
     def conductances(self, materials: Materials) -> np.ndarray:
         """Face conductances per unit area, W/(m^2 K).
 
