@@ -34,13 +34,13 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
+from .numba_cache import njit
 
 __all__ = ["PackingResult", "pack_spheres", "pairs_within_gap", "check_overlaps"]
 
 
 # --------------------------------------------------------------------------- kernels
-@njit(cache=True, inline="always")
+@njit(inline="always")
 def _min_image(dx, L, half):
     """Minimum-image component of a difference dx in a periodic box of edge L."""
     if dx > half:
@@ -50,7 +50,7 @@ def _min_image(dx, L, half):
     return dx
 
 
-@njit(cache=True)
+@njit()
 def _wrap(pos, L):
     n = pos.shape[0]
     for i in range(n):
@@ -63,7 +63,7 @@ def _wrap(pos, L):
                 pos[i, d] = x
 
 
-@njit(cache=True)
+@njit()
 def _cell_list(pos, L, nc):
     n = pos.shape[0]
     head = -np.ones(nc * nc * nc, dtype=np.int64)
@@ -78,7 +78,7 @@ def _cell_list(pos, L, nc):
     return head, nxt
 
 
-@njit(cache=True)
+@njit()
 def _pairs(pos, R, L, extra, cap_i, cap_j):
     """Pairs i < j with minimum-image distance < R_i + R_j + extra.
 
@@ -139,7 +139,7 @@ def _pairs(pos, R, L, extra, cap_i, cap_j):
     return cnt
 
 
-@njit(cache=True)
+@njit()
 def _build_list(pos, R, L, extra, pi, pj):
     cnt = _pairs(pos, R, L, extra, pi, pj)
     if cnt > pi.shape[0]:
@@ -150,7 +150,7 @@ def _build_list(pos, R, L, extra, pi, pj):
     return pi, pj, cnt
 
 
-@njit(cache=True)
+@njit()
 def _pack_kernel(pos, R, L, s_start, s_end, growth0, alpha, tol_final, grow_tol,
                  max_iter, skin):
     """Growth + collective rearrangement. ``pos`` is moved in place.
@@ -262,7 +262,7 @@ def _pack_kernel(pos, R, L, s_start, s_end, growth0, alpha, tol_final, grow_tol,
     return it, s, maxrel, builds
 
 
-@njit(cache=True)
+@njit()
 def _gap_pairs(pos, r, L, gap):
     """Pairs i < j whose surface gap (min image) is below ``gap``: (i, j, gap_ij)."""
     n = pos.shape[0]
