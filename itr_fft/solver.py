@@ -33,6 +33,7 @@ import numba
 import numpy as np
 import scipy.fft
 
+from itr_fv import resources
 from itr_fv.materials import Materials
 from itr_fv.microstructure import Microstructure
 from itr_fv.model import FaceGeometry
@@ -211,7 +212,7 @@ def homogenize(ms: Microstructure, mat: Materials, tol: float = 1e-8,
                x0: np.ndarray | None = None, strict: bool = True, store_fields: bool = True,
                geometry: FaceGeometry | None = None, *, dtype: type = np.float64,
                workers: int | None = None, reference: str | float = "geometric",
-               fft_dtype: type = np.float32) -> HomogenizationResult:
+               fft_dtype: type = np.float32, check_memory: bool = True) -> HomogenizationResult:
     """Effective conductivity tensor by FFT-preconditioned CG (same system as itr_fv).
 
     Parameters
@@ -259,6 +260,10 @@ def homogenize(ms: Microstructure, mat: Materials, tol: float = 1e-8,
         vectors, the operator, the residual check and hence the converged answer in
         ``dtype``, gives the same iteration counts (measured to tol = 1e-10) and costs
         2.6x less FFT time at 128^3. Use float64 to apply it to double precision.
+    check_memory : bool
+        Estimate the peak memory first (:mod:`itr_fv.resources`) and raise
+        :class:`~itr_fv.resources.InsufficientMemoryError` if it exceeds the available
+        memory; False skips the check.
 
     Returns
     -------
@@ -280,6 +285,9 @@ def homogenize(ms: Microstructure, mat: Materials, tol: float = 1e-8,
         raise ValueError(f"workers: expected a positive integer, got {workers!r}")
     workers = int(min(workers, numba.config.NUMBA_NUM_THREADS, os.cpu_count() or 1))
     x0 = check_x0(x0, ms.shape, dirs)
+    if check_memory:
+        resources.check_memory(ms.shape, "itr_fft", dtype=dt.name, store_fields=store_fields,
+                               load_cases=len(dirs))
     geometry, g, floating, labels = discrete_problem(ms, mat, staircase, geometry)
     labels_flat = counts = None
     if labels is not None:

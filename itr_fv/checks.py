@@ -3,16 +3,49 @@
 from __future__ import annotations
 
 import math
+import re
 
-__all__ = ["finite_number"]
+import numpy as np
+
+__all__ = ["finite_number", "real_number", "phase_name", "PhysicalScaleWarning"]
+
+
+class PhysicalScaleWarning(UserWarning):
+    """An input whose scale is implausible for this domain (e.g. micrometres given as metres)."""
+
+#: Phase names: ASCII letters and digits, starting with a letter, with ``-`` ``+`` ``.`` allowed
+#: inside. Not ``_``: the package's flat parameter names are ``k_<phase>`` and
+#: ``R_<phaseA>_<phaseB>``, which a name holding ``_`` would make ambiguous. Not non-ASCII:
+#: names go into VTK files and Parquet column names.
+_PHASE_NAME = re.compile(r"[A-Za-z][A-Za-z0-9.+-]*\Z")
+
+
+def real_number(value: object, argument: str) -> float:
+    """``float(value)`` of a real number; a ValueError naming ``argument`` otherwise.
+
+    ``True``/``False`` are refused: ``float(True)`` is 1.0, which would let a flag pass as
+    a conductivity of 1 W/(m K).
+    """
+    if isinstance(value, (bool, np.bool_)):
+        raise ValueError(f"{argument}: expected a number, got the boolean {value!r}")
+    try:
+        return float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        raise ValueError(f"{argument}: not a number: {value!r}") from None
 
 
 def finite_number(value: object, argument: str) -> float:
     """``float(value)``, or a ValueError naming ``argument`` if it is no finite number."""
-    try:
-        v = float(value)  # type: ignore[arg-type]
-    except (TypeError, ValueError):
-        raise ValueError(f"{argument}: not a number: {value!r}") from None
+    v = real_number(value, argument)
     if not math.isfinite(v):
         raise ValueError(f"{argument} must be finite, got {v!r}")
     return v
+
+
+def phase_name(name: object, argument: str) -> str:
+    """``name`` if it is a valid phase name (see ``_PHASE_NAME``); a ValueError otherwise."""
+    if not isinstance(name, str) or not _PHASE_NAME.match(name):
+        raise ValueError(f"{argument}: phase names are ASCII letters, digits and '-', '+', '.', "
+                         f"starting with a letter (no '_': it separates the parts of "
+                         f"parameter names such as R_Al2O3_silicone), got {name!r}")
+    return name

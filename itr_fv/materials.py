@@ -7,13 +7,10 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
+from .checks import phase_name as _check_name
+from .checks import real_number
+
 __all__ = ["Materials"]
-
-
-def _check_name(name: object, argument: str) -> str:
-    if not isinstance(name, str) or not name:
-        raise ValueError(f"{argument}: phase names must be non-empty strings, got {name!r}")
-    return name
 
 
 class Materials:
@@ -53,10 +50,7 @@ class Materials:
         k: dict[str, float] = {}
         for name, value in conductivity.items():
             _check_name(name, "conductivity")
-            try:
-                v = float(value)
-            except (TypeError, ValueError):
-                raise ValueError(f"conductivity[{name!r}]: not a number: {value!r}") from None
+            v = real_number(value, f"conductivity[{name!r}]")
             if not math.isfinite(v) or v <= 0.0:
                 raise ValueError(f"conductivity[{name!r}] must be finite and > 0 W/(m K), "
                                  f"got {v!r}")
@@ -70,10 +64,7 @@ class Materials:
                 if p not in k:
                     raise ValueError(f"resistance[{pair!r}]: unknown phase {p!r} "
                                      f"(known: {sorted(k)})")
-            try:
-                v = float(value)
-            except (TypeError, ValueError):
-                raise ValueError(f"resistance[{pair!r}]: not a number: {value!r}") from None
+            v = real_number(value, f"resistance[{pair!r}]")
             if math.isnan(v) or v < 0.0:
                 raise ValueError(f"resistance[{pair!r}] must be >= 0 m^2 K/W or inf, got {v!r}")
             key = frozenset((a, b))

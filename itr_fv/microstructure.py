@@ -8,7 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .checks import finite_number
+from .checks import finite_number, phase_name
 
 __all__ = ["Microstructure", "ParticleTable"]
 
@@ -127,8 +127,10 @@ class Microstructure:
         if isinstance(names, str) or not isinstance(names, Sequence) or len(names) < 1:
             raise ValueError("names: expected a sequence of phase names, names[0] the matrix")
         names = tuple(names)
-        if any(not isinstance(n, str) or not n for n in names) or len(set(names)) != len(names):
-            raise ValueError(f"names: expected distinct non-empty strings, got {names!r}")
+        for n in names:
+            phase_name(n, "names")
+        if len(set(names)) != len(names):
+            raise ValueError(f"names: expected distinct phase names, got {names!r}")
         if mid.max() >= len(names):
             raise ValueError(f"material_ids: id {int(mid.max())} has no entry in names {names!r}")
         if np.any((mid == 0) != (pid == 0)):
@@ -210,12 +212,10 @@ class Microstructure:
             mats = np.asarray(list(materials), dtype=object)
             if mats.shape != (c.shape[0],):
                 raise ValueError(f"materials: expected {c.shape[0]} names, got {mats.shape}")
-        if not isinstance(matrix, str) or not matrix:
-            raise ValueError(f"matrix: expected a phase name, got {matrix!r}")
+        phase_name(matrix, "matrix")
         phase_names = [matrix]
         for m in mats:
-            if not isinstance(m, str) or not m:
-                raise ValueError(f"materials: expected phase names, got {m!r}")
+            phase_name(m, "materials")
             if m == matrix:
                 raise ValueError(f"materials: a sphere cannot be of the matrix phase {matrix!r}")
             if m not in phase_names:

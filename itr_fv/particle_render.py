@@ -8,11 +8,11 @@ import numpy as np
 
 from .microstructure import Microstructure
 
-__all__ = ["render_particles", "DEFAULT_COLORS"]
+__all__ = ["render_particles", "DEFAULT_COLORS", "PALETTE"]
 
 #: Colours of the paper's Fig. 4 (Al2O3 red, AlN blue); other phases cycle through a palette.
 DEFAULT_COLORS: dict[str, str] = {"Al2O3": "red", "AlN": "blue"}
-_PALETTE = ("orange", "green", "purple", "gold", "cyan", "magenta", "brown")
+PALETTE = ("orange", "green", "purple", "gold", "cyan", "magenta", "brown")
 
 
 def render_particles(ms: Microstructure, path: str, colors: Mapping[str, str] | None = None,
@@ -47,6 +47,10 @@ def render_particles(ms: Microstructure, path: str, colors: Mapping[str, str] | 
     """
     import pyvista as pv
 
+    from .io import atomic_path, output_file
+    from .vtk_output import offscreen_plotter
+
+    output_file(path, ".png")
     if ms.particles is None or len(ms.particles) == 0:
         raise ValueError("ms: the microstructure has no particle table to render")
     table = ms.particles
@@ -57,7 +61,7 @@ def render_particles(ms: Microstructure, path: str, colors: Mapping[str, str] | 
     cmap = dict(DEFAULT_COLORS)
     extra = [m for m in dict.fromkeys(mats.tolist()) if m not in cmap]
     for k, m in enumerate(extra):
-        cmap[m] = _PALETTE[k % len(_PALETTE)]
+        cmap[m] = PALETTE[k % len(PALETTE)]
     if colors:
         cmap.update(colors)
 
@@ -79,7 +83,7 @@ def render_particles(ms: Microstructure, path: str, colors: Mapping[str, str] | 
                     ms_.append(mats[keep])
         c, r, mats = np.concatenate(cs), np.concatenate(rs), np.concatenate(ms_)
 
-    pl = pv.Plotter(off_screen=True, window_size=list(window_size))
+    pl = offscreen_plotter(window_size=list(window_size))
     pl.set_background("white")
     sphere = pv.Sphere(radius=1.0, theta_resolution=resolution, phi_resolution=resolution)
     bounds = (0.0, box_um[0], 0.0, box_um[1], 0.0, box_um[2])
@@ -95,6 +99,7 @@ def render_particles(ms: Microstructure, path: str, colors: Mapping[str, str] | 
         pl.add_mesh(pv.Box(bounds).outline(), color="black", line_width=2)
     pl.add_legend(bcolor="white", size=(0.24, 0.12))
     pl.camera_position = "iso"
-    pl.screenshot(path)
+    with atomic_path(path) as tmp:
+        pl.screenshot(str(tmp))
     pl.close()
     return path

@@ -11,6 +11,8 @@ Diameters are in micrometres throughout this module (names end in ``_um``).
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -414,6 +416,8 @@ def plot_histogram_fit(fit: HistogramFit, path: str, title: str | None = None,
         ax.set_title(title)
     ax.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(path)
+    from .io import atomic_path
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format=Path(path).suffix.lstrip(".") or "png")
     plt.close(fig)
     return path

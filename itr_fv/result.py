@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -121,16 +122,19 @@ class HomogenizationResult:
         """Mean of the solved diagonal entries, W/(m K)."""
         return float(np.mean([self.k_eff[d, d] for d in self.directions]))
 
-    def to_vtk(self, path: str | Path) -> Path:
-        """Write a ``.vti`` image with material, particle id, temperature and flux magnitude.
+    def to_vtk(self, path: str | Path, *, load_cases: Sequence[int] | None = None,
+               vectors: bool = True, precision: str = "float32") -> Path:
+        """Write a compressed ``.vti`` image: material, particle id, temperature, its
+        fluctuation, flux magnitude (and vectors) per load case; written atomically.
 
         See :func:`itr_fv.vtk_output.write_vti`.
         """
         from .vtk_output import write_vti
-        return write_vti(self, path)
+        return write_vti(self, path, load_cases=load_cases, vectors=vectors,
+                         precision=precision)
 
     def render_png(self, path: str | Path, load_case: int = 0) -> Path:
-        """Off-screen PNG of the temperature slices and the particles.
+        """Off-screen PNG: heat-flux magnitude and interfaces on mid-planes, phases, k_eff.
 
         See :func:`itr_fv.vtk_output.render_png`.
         """

@@ -10,6 +10,7 @@ import pyamg
 import pyamg.krylov
 import scipy.sparse
 
+from . import resources
 from .materials import Materials
 from .microstructure import Microstructure
 from .model import FaceGeometry, load_vector
@@ -104,8 +105,8 @@ def homogenize(ms: Microstructure, mat: Materials, tol: float = 1e-8,
                maxiter: int | None = None, directions: Sequence[int] = (0, 1, 2),
                staircase: bool = True, callback: Callback | None = None,
                x0: np.ndarray | None = None, strict: bool = True, store_fields: bool = True,
-               geometry: FaceGeometry | None = None, amg: str = "classical"
-               ) -> HomogenizationResult:
+               geometry: FaceGeometry | None = None, amg: str = "classical", *,
+               check_memory: bool = True) -> HomogenizationResult:
     """Effective conductivity tensor by the reference finite-volume solver.
 
     Assembles the sparse operator of :mod:`itr_fv.model`, builds one pyamg hierarchy
@@ -141,6 +142,10 @@ def homogenize(ms: Microstructure, mat: Materials, tol: float = 1e-8,
         on these M-matrices with jumping conductances it needs 3-4x fewer CG iterations
         than smoothed aggregation, see validation/results/bench_fv.md) or smoothed
         aggregation.
+    check_memory : bool
+        Estimate the peak memory first (:mod:`itr_fv.resources`) and raise
+        :class:`~itr_fv.resources.InsufficientMemoryError` if it exceeds the available
+        memory; False skips the check.
 
     Returns
     -------
@@ -152,6 +157,9 @@ def homogenize(ms: Microstructure, mat: Materials, tol: float = 1e-8,
     if amg not in _AMG:
         raise ValueError(f"amg: expected one of {sorted(_AMG)}, got {amg!r}")
     x0 = check_x0(x0, ms.shape, dirs)
+    if check_memory:
+        resources.check_memory(ms.shape, "itr_fv", store_fields=store_fields,
+                               load_cases=len(dirs))
     geometry, g, floating, labels = discrete_problem(ms, mat, staircase, geometry)
     if labels is None:
         pins = np.array([0])

@@ -24,6 +24,7 @@ from .model import (
     face_geometry,
     mean_flux,
 )
+from .checks import PhysicalScaleWarning
 from .result import ConvergenceError, FloatingClusters, HomogenizationResult
 
 __all__ = ["check_solver_args", "check_x0", "discrete_problem", "SolveRecord", "build_result",
@@ -92,6 +93,28 @@ def floating_clusters(g: np.ndarray) -> tuple[FloatingClusters, np.ndarray | Non
     return FloatingClusters(n - 1, sizes[1:], float(sizes[1:].sum() / labels.size)), labels
 
 
+#: Voxels above this edge (m) with a finite interface resistance warn: this package's domain
+#: is particle-filled composites with micrometre fillers, and a resistance in m^2 K/W
+#: only means something against voxels in metres.
+IMPLAUSIBLE_VOXEL_M = 1e-3
+
+
+def warn_implausible_scale(ms: Microstructure, mat: Materials) -> None:
+    """Warn (:class:`PhysicalScaleWarning`) when the voxel is above 1 mm and an interface
+    resistance is finite and positive: most often micrometres passed as metres."""
+    h = ms.voxel_m
+    if h <= IMPLAUSIBLE_VOXEL_M:
+        return
+    finite = [v for v in mat.resistance.values() if 0.0 < v < math.inf]
+    if finite:
+        warnings.warn(
+            f"voxel_m: the voxel edge is {h:.4g} m (> 1 mm) while interface resistances are "
+            f"finite (up to {max(finite):.3g} m^2 K/W). Lengths are in metres: if {h:.4g} was "
+            f"meant in micrometres, the voxel is voxel_m={h * 1e-6:.4g}. Taken as metres, the "
+            "interfaces weigh ~1e6 times too little and k_eff comes out too high.",
+            PhysicalScaleWarning, stacklevel=4)
+
+
 def discrete_problem(ms: Microstructure, mat: Materials, staircase: bool,
                      geometry: FaceGeometry | None
                      ) -> tuple[FaceGeometry, np.ndarray, FloatingClusters, np.ndarray | None]:
@@ -101,6 +124,7 @@ def discrete_problem(ms: Microstructure, mat: Materials, staircase: bool,
         geometry = face_geometry(ms, staircase)
     elif not isinstance(geometry, FaceGeometry) or geometry.shape != ms.shape:
         raise ValueError("geometry: expected the FaceGeometry of this microstructure")
+    warn_implausible_scale(ms, mat)
     g = geometry.conductances(mat)
     floating, labels = floating_clusters(g)
     return geometry, g, floating, labels

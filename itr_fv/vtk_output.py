@@ -1,18 +1,28 @@
-"""VTK (.vti) output of homogenization fields and off-screen renders (pyvista)."""
+"""VTK (.vti) output of homogenization fields and off-screen renders (pyvista).
+
+Files are written atomically (:mod:`itr_fv.io`): a killed write leaves no truncated file.
+"""
 
 from __future__ import annotations
 
+import ctypes.util
+import os
+import sys
+from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
+
+from .io import atomic_path, output_file
+from .particle_render import DEFAULT_COLORS, PALETTE
 
 if TYPE_CHECKING:  # pragma: no cover
     import pyvista
 
     from .result import HomogenizationResult
 
-__all__ = ["to_image_data", "write_vti", "render_png", "cell_flux"]
+__all__ = ["to_image_data", "write_vti", "render_png", "cell_flux", "offscreen_plotter"]
 
 
 def cell_flux(fluxes: np.ndarray) -> np.ndarray:
@@ -31,21 +41,52 @@ def cell_flux(fluxes: np.ndarray) -> np.ndarray:
                     axis=-1)
 
 
-def to_image_data(result: "HomogenizationResult") -> "pyvista.ImageData":
-    """pyvista ImageData of the microstructure and the fields of every load case.
+def _case_indices(result: "HomogenizationResult", load_cases: Sequence[int] | None) -> list[int]:
+    n = len(result.directions)
+    if load_cases is None:
+        return list(range(n))
+    try:
+        cases = [int(c) for c in load_cases]
+    except (TypeError, ValueError):
+        raise ValueError(f"load_cases: expected indices into result.directions, "
+                         f"got {load_cases!r}") from None
+    if not cases or any(not 0 <= c < n for c in cases) or len(set(cases)) != len(cases):
+        raise ValueError(f"load_cases: expected distinct indices in 0..{n - 1}, got {load_cases!r}")
+    return cases
 
-    Cell arrays: ``material`` (id), ``particle_id``, ``temperature`` and ``flux_magnitude``
-    of the first load case (K for E = 1 K/m; W/m^2), and per load case ``temperature_eN``,
-    ``flux_eN`` (vector) and ``flux_magnitude_eN``. Field data: ``k_eff`` (W/(m K)) and
-    the phase names.
+
+def to_image_data(result: "HomogenizationResult", *, load_cases: Sequence[int] | None = None,
+                  vectors: bool = True, precision: str = "float32") -> "pyvista.ImageData":
+    """pyvista ImageData of the microstructure and the fields of the chosen load cases.
+
+    Cell arrays: ``material`` (id), ``particle_id``; per load case ``eN`` (N = 1, 2, 3 for
+    E = e_1, e_2, e_3 of 1 K/m) ``temperature_eN`` (K), ``temperature_fluctuation_eN``
+    (theta = T + E.x, K), ``flux_magnitude_eN`` (W/m^2) and, with ``vectors``, ``flux_eN``
+    (W/m^2); the first case's temperature is the active scalar. Field data: ``k_eff``
+    (W/(m K), float64), ``phase_names`` and ``load_directions``.
+
+    Parameters
+    ----------
+    result : HomogenizationResult
+        Solved with ``store_fields=True``.
+    load_cases : sequence of int, optional
+        Indices into ``result.directions`` (default all).
+    vectors : bool
+        Include the flux vectors (three components per cell).
+    precision : {"float32", "float64"}
+        Storage of the field arrays; float32 halves the file and keeps 7 digits.
     """
     import pyvista as pv
 
     ms = result.microstructure
     if ms is None:
         raise ValueError("result: holds no microstructure to write")
-    if result.temperature is None or result.fluxes is None:
+    if result.temperature is None or result.fluxes is None or result.theta is None:
         raise ValueError("result: fields were not stored (solve with store_fields=True)")
+    if precision not in ("float32", "float64"):
+        raise ValueError(f"precision: expected 'float32' or 'float64', got {precision!r}")
+    cases = _case_indices(result, load_cases)
+    dt = np.dtype(precision)
     n = ms.shape
     h = ms.voxel_m
     grid = pv.ImageData(dimensions=(n[0] + 1, n[1] + 1, n[2] + 1), spacing=(h, h, h))
@@ -53,75 +94,146 @@ def to_image_data(result: "HomogenizationResult") -> "pyvista.ImageData":
     def flat(a: np.ndarray) -> np.ndarray:  # VTK orders cells x fastest
         return np.asarray(a).ravel(order="F")
 
-    grid.cell_data["material"] = flat(ms.material_ids)
-    grid.cell_data["particle_id"] = flat(ms.particle_ids)
-    for c, d in enumerate(result.directions):
+    small = np.uint8 if len(ms.names) < 256 else np.int32
+    grid.cell_data["material"] = flat(ms.material_ids.astype(small))
+    grid.cell_data["particle_id"] = flat(ms.particle_ids.astype(np.int32))
+    for c in cases:
+        tag = f"e{result.directions[c] + 1}"
         q = cell_flux(result.fluxes[c])
-        mag = np.sqrt((q * q).sum(axis=-1))
-        grid.cell_data[f"temperature_e{d + 1}"] = flat(result.temperature[c])
-        grid.cell_data[f"flux_e{d + 1}"] = q.reshape(-1, 3, order="F")
-        grid.cell_data[f"flux_magnitude_e{d + 1}"] = flat(mag)
-        if c == 0:
-            grid.cell_data["temperature"] = flat(result.temperature[c])
-            grid.cell_data["flux_magnitude"] = flat(mag)
+        mag = np.sqrt((q * q).sum(axis=-1)).astype(dt)
+        temp = result.temperature[c].astype(dt)
+        grid.cell_data[f"temperature_{tag}"] = flat(temp)
+        grid.cell_data[f"temperature_fluctuation_{tag}"] = flat(result.theta[c].astype(dt))
+        if vectors:
+            grid.cell_data[f"flux_{tag}"] = q.astype(dt).reshape(-1, 3, order="F")
+        grid.cell_data[f"flux_magnitude_{tag}"] = flat(mag)
     grid.field_data["k_eff"] = result.k_eff.ravel()
     grid.field_data["phase_names"] = np.array(ms.names)
-    grid.cell_data.active_scalars_name = "temperature"
+    grid.field_data["load_directions"] = np.array([result.directions[c] + 1 for c in cases])
+    grid.cell_data.active_scalars_name = f"temperature_e{result.directions[cases[0]] + 1}"
     return grid
 
 
-def write_vti(result: "HomogenizationResult", path: str | Path) -> Path:
-    """Write the fields of ``result`` as a VTK XML image (``.vti``); returns the path."""
-    path = Path(path)
-    if path.suffix != ".vti":
-        raise ValueError(f"path: expected a .vti file name, got {str(path)!r}")
-    path.parent.mkdir(parents=True, exist_ok=True)
-    to_image_data(result).save(str(path))
+def write_vti(result: "HomogenizationResult", path: str | Path, *,
+              load_cases: Sequence[int] | None = None, vectors: bool = True,
+              precision: str = "float32") -> Path:
+    """Write the fields of ``result`` as a zlib-compressed VTK XML image; returns the path.
+
+    The file appears under its name only once complete. Arguments after ``path`` are those
+    of :func:`to_image_data`.
+
+    Raises
+    ------
+    ValueError
+        If ``path`` does not end in ``.vti`` or names an existing folder.
+    """
+    path = output_file(path, ".vti")
+    grid = to_image_data(result, load_cases=load_cases, vectors=vectors, precision=precision)
+    with atomic_path(path) as tmp:
+        grid.save(str(tmp), binary=True, compression="zlib")
     return path
 
 
-def render_png(result: "HomogenizationResult", path: str | Path, load_case: int = 0,
-               window_size: tuple[int, int] = (1200, 600)) -> Path:
-    """Off-screen render: temperature on three mid-plane slices, and the particles.
+def _use_egl_without_display() -> None:
+    """Off-screen VTK without an X display: choose the EGL window up front.
 
-    No display is needed (pyvista ``off_screen``).
+    VTK otherwise tries X first and prints "bad X server connection" before falling back.
+    Left alone where the user chose a window class, where a display exists, or where no EGL
+    library is installed.
+    """
+    if (sys.platform.startswith("linux") and not os.environ.get("DISPLAY")
+            and not os.environ.get("WAYLAND_DISPLAY")
+            and "VTK_DEFAULT_OPENGL_WINDOW" not in os.environ
+            and ctypes.util.find_library("EGL")):
+        os.environ["VTK_DEFAULT_OPENGL_WINDOW"] = "vtkEGLRenderWindow"
+
+
+def offscreen_plotter(**kwargs) -> "pyvista.Plotter":
+    """A pyvista Plotter rendering off screen (no display needed, no X warnings)."""
+    import pyvista as pv
+
+    _use_egl_without_display()
+    return pv.Plotter(off_screen=True, **kwargs)
+
+
+def _phase_colours(names: Sequence[str]) -> list[str]:
+    extra = iter(PALETTE)
+    return [DEFAULT_COLORS.get(n) or next(extra, "grey") for n in names]
+
+
+def render_png(result: "HomogenizationResult", path: str | Path, load_case: int = 0,
+               window_size: tuple[int, int] = (1600, 800)) -> Path:
+    """Off-screen figure of one load case: heat-flux magnitude with the interfaces, and phases.
+
+    Left: the heat-flux magnitude |q| / |<q>| (dimensionless, log colour scale) on three
+    orthogonal mid-planes, with the particle surfaces traced in white on the planes, so
+    the hot paths through particles and contacts and the resistive interfaces stand out.
+    Right: the same planes coloured by phase with a legend. The title gives the load
+    direction and k_eff (W/(m K)).
 
     Parameters
     ----------
     result : HomogenizationResult
+        Solved with ``store_fields=True``.
     path : str or Path
-        PNG file to write.
+        PNG file to write (atomically).
     load_case : int
-        Index into ``result.directions`` whose temperature is shown.
+        Index into ``result.directions``.
     window_size : (int, int)
         Pixels.
     """
-    import pyvista as pv
-
-    path = Path(path)
-    if path.suffix.lower() != ".png":
-        raise ValueError(f"path: expected a .png file name, got {str(path)!r}")
+    path = output_file(path, ".png")
     if not 0 <= load_case < len(result.directions):
         raise ValueError(f"load_case: expected 0..{len(result.directions) - 1}, got {load_case}")
-    grid = to_image_data(result)
-    name = f"temperature_e{result.directions[load_case] + 1}"
-    grid.cell_data.active_scalars_name = name
-    pl = pv.Plotter(off_screen=True, shape=(1, 2), window_size=list(window_size))
+    grid = to_image_data(result, load_cases=[load_case], vectors=False)
+    ms = result.microstructure
+    d = result.directions[load_case]
+    tag = f"e{d + 1}"
+    mean_q = float(np.linalg.norm(np.nan_to_num(result.k_eff[:, d])))
+    rel = np.asarray(grid.cell_data[f"flux_magnitude_{tag}"], dtype=np.float64)
+    rel = rel / mean_q if mean_q > 0 else rel
+    grid.cell_data["relative_flux"] = np.clip(rel, 1e-3, None).astype(np.float32)
+    grid.cell_data["solid"] = (np.asarray(grid.cell_data["particle_id"]) > 0).astype(np.float32)
+    points = grid.cell_data_to_point_data(pass_cell_data=True)
+    slices = points.slice_orthogonal().combine()
+    edges = slices.contour([0.5], scalars="solid")
+
+    pl = offscreen_plotter(shape=(1, 2), window_size=list(window_size), border=False)
+    pl.set_background("white")
+    bar = dict(vertical=True, position_x=0.84, position_y=0.12, width=0.05, height=0.66,
+               title_font_size=15, label_font_size=13, n_labels=5, fmt="%.2g", color="black")
     pl.subplot(0, 0)
-    pl.add_text(f"T for E = e{result.directions[load_case] + 1} (K)", font_size=10)
-    pl.add_mesh(grid.cell_data_to_point_data().slice_orthogonal(), scalars=name, cmap="turbo",
-                lighting=False, show_scalar_bar=True)
+    hi = float(np.percentile(rel, 99.5)) if rel.size else 1.0
+    pl.add_mesh(slices, scalars="relative_flux", cmap="inferno", log_scale=True,
+                clim=(max(1e-2, hi * 1e-3), max(hi, 1.0)), lighting=False,
+                preference="cell", scalar_bar_args=dict(bar, title="flux / mean flux\n"))
+    if edges.n_points:
+        pl.add_mesh(edges, color="white", line_width=1.5)
     pl.add_mesh(grid.outline(), color="black")
+    k = np.diag(result.k_eff)
+    ktxt = ", ".join("nan" if not np.isfinite(v) else f"{v:.4g}" for v in k)
+    pl.add_text(f"heat flux for E along x{d + 1}\nk_eff diagonal = ({ktxt}) W/(m K)",
+                position="upper_left", font_size=11, color="black")
+    pl.camera_position = "iso"
     pl.subplot(0, 1)
-    pl.add_text("particles by material", font_size=10)
-    solid = grid.threshold(0.5, scalars="particle_id")
-    if solid.n_cells:
-        pl.add_mesh(solid.extract_surface(algorithm="dataset_surface"), scalars="material",
-                    cmap="Set1",
-                    show_scalar_bar=False)
+    names = list(ms.names)
+    colours = _phase_colours(names)
+    colours[0] = "lightgrey"
+    legend = dict(bar, title="phase\n", n_labels=0, height=0.08 * len(names) + 0.04,
+                  position_y=0.1, width=0.04)
+    pl.add_mesh(slices, scalars="material", cmap=colours, clim=(-0.5, len(names) - 0.5),
+                categories=True, preference="cell", lighting=False,
+                annotations={float(i): n for i, n in enumerate(names)},
+                scalar_bar_args=legend)
+    if edges.n_points:
+        pl.add_mesh(edges, color="black", line_width=1.0)
     pl.add_mesh(grid.outline(), color="black")
-    pl.link_views()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    pl.screenshot(str(path))
+    h_um = ms.voxel_m * 1e6
+    box = " x ".join(f"{s * h_um:.3g}" for s in ms.shape)
+    pl.add_text(f"phases (box {box} um, voxel {h_um:.3g} um)", position="upper_left",
+                font_size=11, color="black")
+    pl.camera_position = "iso"
+    with atomic_path(path) as tmp:
+        pl.screenshot(str(tmp))
     pl.close()
     return path

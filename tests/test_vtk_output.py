@@ -17,20 +17,24 @@ def result():
 def test_vti_round_trip_holds_all_arrays(result, tmp_path):
     path = result.to_vtk(tmp_path / "field.vti")
     grid = pv.read(path)
-    for name in ("material", "particle_id", "temperature", "flux_magnitude", "temperature_e3",
-                 "flux_e1"):
+    for name in ("material", "particle_id", "temperature_e1", "temperature_fluctuation_e1",
+                 "flux_magnitude_e1", "temperature_e3", "flux_e1", "flux_magnitude_e3"):
         assert name in grid.cell_data, name
     assert grid.n_cells == 16**3
     ms = result.microstructure
     # x-fastest VTK ordering maps back onto the (i, j, k) arrays
     np.testing.assert_array_equal(
         np.asarray(grid.cell_data["particle_id"]).reshape(ms.shape, order="F"), ms.particle_ids)
-    T = np.asarray(grid.cell_data["temperature"]).reshape(ms.shape, order="F")
-    np.testing.assert_allclose(T, result.temperature[0])
+    T = np.asarray(grid.cell_data["temperature_e1"]).reshape(ms.shape, order="F")
+    assert grid.cell_data["temperature_e1"].dtype == np.float32  # default precision
+    np.testing.assert_allclose(T, result.temperature[0], rtol=2e-7, atol=1e-7 * np.abs(T).max())
+    theta = np.asarray(grid.cell_data["temperature_fluctuation_e1"]).reshape(ms.shape, order="F")
+    np.testing.assert_allclose(theta, result.theta[0], rtol=2e-7,
+                               atol=1e-6 * np.abs(result.theta[0]).max())
     # temperature falls along the load: T = -x + theta, theta periodic
     assert T[-1].mean() < T[0].mean()
     # the mean flux magnitude in the matrix is close to the effective conductivity for E = 1
-    mag = np.asarray(grid.cell_data["flux_magnitude"])
+    mag = np.asarray(grid.cell_data["flux_magnitude_e1"])
     assert 0.5 * result.k_eff[0, 0] < mag.mean() < 2.0 * result.k_eff[0, 0]
     np.testing.assert_allclose(np.asarray(grid.field_data["k_eff"]).reshape(3, 3)[:, 0],
                                result.k_eff[:, 0])
@@ -48,3 +52,30 @@ def test_offscreen_png_render(result, tmp_path):
 def test_vti_path_must_end_in_vti(result, tmp_path):
     with pytest.raises(ValueError, match="path"):
         result.to_vtk(tmp_path / "field.vtk")
+
+
+def test_vti_subset_and_float64(result, tmp_path):
+    path = result.to_vtk(tmp_path / "one.vti", load_cases=[1], vectors=False, precision="float64")
+    grid = pv.read(path)
+    assert "temperature_e3" in grid.cell_data and "temperature_e1" not in grid.cell_data
+    assert "flux_e3" not in grid.cell_data
+    T = np.asarray(grid.cell_data["temperature_e3"]).reshape(result.microstructure.shape,
+                                                             order="F")
+    np.testing.assert_array_equal(T, result.temperature[1])
+    assert list(np.asarray(grid.field_data["load_directions"])) == [3]
+    with pytest.raises(ValueError, match="load_cases"):
+        result.to_vtk(tmp_path / "bad.vti", load_cases=[2])
+    with pytest.raises(ValueError, match="precision"):
+        result.to_vtk(tmp_path / "bad.vti", precision="float16")
+
+
+def test_vti_onto_a_folder_is_refused(result, tmp_path):
+    folder = tmp_path / "taken.vti"
+    folder.mkdir()
+    with pytest.raises(ValueError, match="is a folder"):
+        result.to_vtk(folder)
+    png_folder = tmp_path / "taken.png"
+    png_folder.mkdir()
+    with pytest.raises(ValueError, match="is a folder"):
+        result.render_png(png_folder)
+    assert list(folder.iterdir()) == [] and list(png_folder.iterdir()) == []

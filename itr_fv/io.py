@@ -1,0 +1,173 @@
+"""Safe file output: atomic writes, output-path checks, a run manifest written last.
+
+Every file the package writes goes through :func:`atomic_path`: the content is written to
+a temporary file in the destination folder and renamed onto the final name only when it is
+complete (``os.replace`` is atomic on one file system). A run killed part way (SIGTERM,
+SIGKILL, a full disk) therefore leaves either the previous file or no file under the final
+name, never a truncated one. A folder of results is closed by :func:`write_manifest`
+(``manifest.json``: inputs, package and library versions, files with sizes and SHA-256),
+written last: a folder whose manifest is missing, or whose files do not match it, holds an
+unfinished or mixed run. :func:`begin_run` removes a previous run's manifest and the files it
+listed before a new run writes into the same folder.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import json
+import os
+import platform
+import sys
+import tempfile
+from collections.abc import Iterator, Mapping, Sequence
+from datetime import datetime, timezone
+from pathlib import Path
+
+__all__ = ["output_file", "atomic_path", "write_text", "sha256", "begin_run",
+           "write_manifest", "read_manifest", "MANIFEST"]
+
+MANIFEST = "manifest.json"
+_TMP_PREFIX = ".itr-partial-"
+
+
+def output_file(path: str | os.PathLike, suffix: str | None = None,
+                argument: str = "path") -> Path:
+    """Check an output file name: not a folder, the right suffix; returns it as a Path.
+
+    Raises
+    ------
+    ValueError
+        If ``path`` is an existing directory, has another suffix than ``suffix``, or its
+        parent exists and is not a directory.
+    """
+    p = Path(path)
+    if suffix is not None and p.suffix.lower() != suffix:
+        raise ValueError(f"{argument}: expected a {suffix} file name, got {str(p)!r}")
+    if p.is_dir():
+        raise ValueError(f"{argument}: {str(p)!r} is a folder; give a file name inside it")
+    for parent in p.parents:
+        if parent.exists():
+            if not parent.is_dir():
+                raise ValueError(f"{argument}: {str(parent)!r} exists and is not a folder")
+            break
+    return p
+
+
+@contextlib.contextmanager
+def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
+    """Context manager giving a temporary path that becomes ``path`` on success.
+
+    The temporary file lies in the destination folder (created if needed) and keeps the
+    final suffix (writers such as VTK choose the format by it). On any exception, including
+    KeyboardInterrupt and the SystemExit the command line raises on SIGTERM, it is removed
+    and the final name is left as it was.
+    """
+    final = Path(path)
+    final.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=_TMP_PREFIX + final.stem + ".", suffix=final.suffix,
+                               dir=final.parent)
+    os.close(fd)
+    tmp_path = Path(tmp)
+    try:
+        yield tmp_path
+        if not tmp_path.exists() or tmp_path.stat().st_size == 0:
+            raise OSError(f"{final}: the writer produced no output")
+        os.chmod(tmp_path, 0o666 & ~_umask())  # mkstemp makes 0600; a plain open respects umask
+        os.replace(tmp_path, final)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            tmp_path.unlink()
+        raise
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+def write_text(path: str | os.PathLike, text: str) -> Path:
+    """Write a text file atomically (UTF-8); returns its path."""
+    final = Path(path)
+    with atomic_path(final) as tmp:
+        tmp.write_text(text, encoding="utf-8")
+    return final
+
+
+def sha256(path: str | os.PathLike) -> str:
+    """Hex SHA-256 of a file's content."""
+    h = hashlib.sha256()
+    with open(path, "rb") as fh:
+        for block in iter(lambda: fh.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def read_manifest(folder: str | os.PathLike) -> dict | None:
+    """The manifest of a results folder, or None if there is none (or it is unreadable)."""
+    p = Path(folder) / MANIFEST
+    try:
+        return json.loads(p.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return None
+
+
+def begin_run(folder: str | os.PathLike) -> None:
+    """Prepare ``folder`` for a new run: drop an earlier run's manifest and listed files.
+
+    Only files named in the earlier manifest (and leftover temporary files of this module)
+    are removed; anything else the user keeps in the folder stays.
+    """
+    folder = Path(folder)
+    old = read_manifest(folder)
+    if old is not None:
+        (folder / MANIFEST).unlink(missing_ok=True)
+        for entry in old.get("files", []):
+            name = entry.get("path") if isinstance(entry, dict) else None
+            if name and "/" not in name and "\\" not in name and name != MANIFEST:
+                (folder / name).unlink(missing_ok=True)
+    if folder.is_dir():
+        for stale in folder.glob(_TMP_PREFIX + "*"):
+            stale.unlink(missing_ok=True)
+
+
+def _versions() -> dict[str, str]:
+    from importlib import metadata
+    out = {"python": platform.python_version()}
+    for dist in ("itr-composites", "numpy", "scipy", "numba", "pyamg", "pyvista"):
+        try:
+            out[dist] = metadata.version(dist)
+        except metadata.PackageNotFoundError:
+            continue
+    return out
+
+
+def write_manifest(folder: str | os.PathLike, files: Sequence[str | os.PathLike],
+                   inputs: Mapping[str, object], command: Sequence[str] | None = None) -> Path:
+    """Write ``folder/manifest.json`` last, closing a run; returns its path.
+
+    Parameters
+    ----------
+    folder : path
+        The results folder.
+    files : sequence of paths
+        Files of this run (inside ``folder``); each is listed with size and SHA-256.
+    inputs : mapping
+        The run's settings (JSON-serialisable).
+    command : sequence of str, optional
+        The command line (default ``sys.argv``).
+    """
+    folder = Path(folder)
+    entries = []
+    for f in files:
+        p = Path(f)
+        entries.append({"path": p.name, "bytes": p.stat().st_size, "sha256": sha256(p)})
+    manifest = {
+        "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+        "command": list(sys.argv if command is None else command),
+        "inputs": dict(inputs),
+        "versions": _versions(),
+        "files": entries,
+    }
+    return write_text(folder / MANIFEST, json.dumps(manifest, indent=2) + "\n")

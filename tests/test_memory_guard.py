@@ -1,0 +1,68 @@
+"""The memory guard: estimate before a solve, refuse what cannot fit (issue 8, point 5)."""
+
+import numpy as np
+import pytest
+from conftest import sc_sphere
+
+import itr_fft
+import itr_fv
+from itr_fv import Materials, resources
+from itr_fv.resources import InsufficientMemoryError, check_memory, estimate_peak_memory
+
+MAT = Materials({"matrix": 1.0, "filler": 10.0}, {("filler", "matrix"): 0.05}, "matrix")
+
+
+def test_estimates_scale_with_voxels_and_rank_the_solvers():
+    fv = estimate_peak_memory((400, 400, 400), "itr_fv", store_fields=False)
+    f64 = estimate_peak_memory((400, 400, 400), "itr_fft", store_fields=False)
+    f32 = estimate_peak_memory((400, 400, 400), "itr_fft", dtype="float32", store_fields=False)
+    assert fv == 400**3 * resources.FV_BYTES_PER_VOXEL
+    assert fv > 10 * f64 and f32 <= f64
+    # the 400^3 FV solve that died at 7.6 GB in assemble_operator is estimated far above that
+    assert fv > 60e9
+    fields = estimate_peak_memory((400, 400, 400), "itr_fft", store_fields=True, load_cases=3)
+    assert fields - f64 == 400**3 * 3 * resources.FIELD_BYTES_PER_VOXEL_CASE
+    with pytest.raises(ValueError, match="solver"):
+        estimate_peak_memory((8, 8, 8), "itr_gpu")
+
+
+def test_refusal_names_estimate_available_and_what_would_fit():
+    with pytest.raises(InsufficientMemoryError) as info:
+        check_memory((400, 400, 400), "itr_fv", store_fields=False, available=24 * 10**9)
+    msg = str(info.value)
+    assert "400x400x400" in msg and "80.0 GB" in msg and "24.0 GB" in msg
+    assert "itr_fft with dtype=float64" in msg and "check_memory=False" in msg
+    assert info.value.estimate > info.value.available
+    # nothing fits: say so
+    with pytest.raises(InsufficientMemoryError, match="no solver fits"):
+        check_memory((2000, 2000, 2000), "itr_fft", available=10**9)
+    # enough memory: the estimate is returned
+    assert check_memory((64, 64, 64), "itr_fv", available=10**10) == \
+        estimate_peak_memory((64, 64, 64), "itr_fv")
+
+
+@pytest.mark.parametrize("solve", [itr_fv.homogenize, itr_fft.homogenize])
+def test_solvers_refuse_before_any_work_and_can_be_told_to_go_ahead(solve, monkeypatch):
+    ms = sc_sphere(12, 0.2)
+    calls = []
+    monkeypatch.setattr(resources, "available_memory", lambda: 1000)  # 1 kB left
+    import itr_fv.solver_common as common
+    real = common.discrete_problem
+
+    def spy(*args, **kwargs):
+        calls.append(1)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(common, "discrete_problem", spy)
+    monkeypatch.setattr(itr_fv.solver, "discrete_problem", spy)
+    monkeypatch.setattr(itr_fft.solver, "discrete_problem", spy)
+    with pytest.raises(InsufficientMemoryError, match="12x12x12"):
+        solve(ms, MAT, tol=1e-8)
+    assert calls == []  # refused before the geometry was built
+    res = solve(ms, MAT, tol=1e-8, check_memory=False)
+    assert calls == [1] and res.converged and np.isfinite(res.k_eff).all()
+
+
+def test_available_memory_reads_this_machine():
+    avail = resources.available_memory()
+    assert avail is None or 10**8 < avail < 10**14
