@@ -34,6 +34,7 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
+
 from .numba_cache import njit
 
 __all__ = ["PackingResult", "pack_spheres", "pairs_within_gap", "check_overlaps"]

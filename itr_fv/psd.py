@@ -11,11 +11,10 @@ Diameters are in micrometres throughout this module (names end in ``_um``).
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 from scipy import optimize, special

@@ -37,7 +37,7 @@ FFT64_BYTES_PER_VOXEL = 110
 FFT32_BYTES_PER_VOXEL = 110  # measured 93-106: the set-up (float64 conductances) sets the peak
 #: theta + temperature (8 B each) and three face fluxes (24 B) per load case, plus the
 #: temporaries of the flux computation.
-FIELD_BYTES_PER_VOXEL_CASE = 56
+FIELD_BYTES_PER_VOXEL_CASE = 64
 #: Fraction of the available memory a solve may plan to use.
 HEADROOM = 0.9
 

@@ -13,6 +13,7 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
+from .checks import PhysicalScaleWarning
 from .materials import Materials
 from .microstructure import Microstructure
 from .model import (
@@ -24,7 +25,6 @@ from .model import (
     face_geometry,
     mean_flux,
 )
-from .checks import PhysicalScaleWarning
 from .result import ConvergenceError, FloatingClusters, HomogenizationResult
 
 __all__ = ["check_solver_args", "check_x0", "discrete_problem", "SolveRecord", "build_result",

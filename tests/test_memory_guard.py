@@ -66,3 +66,37 @@ def test_solvers_refuse_before_any_work_and_can_be_told_to_go_ahead(solve, monke
 def test_available_memory_reads_this_machine():
     avail = resources.available_memory()
     assert avail is None or 10**8 < avail < 10**14
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("solver,n", [("itr_fv", 64), ("itr_fft", 128)])
+def test_estimate_bounds_the_measured_peak(solver, n):
+    """The guard must not underestimate: peak RSS growth of a real solve (fresh process,
+    dense 60 % Al2O3 RVE at 0.125 um voxels, three load cases, fields kept) stays below the
+    estimate, and the estimate is not wildly pessimistic (< 2.5x)."""
+    import json
+    import subprocess
+    import sys
+    import textwrap
+
+    code = textwrap.dedent(f"""
+        import json, resource
+        import numpy as np
+        from itr_fv import Materials
+        from itr_fv.rve import FillerSpec, generate_rve
+        ms = generate_rve([FillerSpec("Al2O3", mu=1.02, sigma=0.35, volume_fraction=0.6)],
+                          box_um={n} * 0.125, voxel_um=0.125, seed=1,
+                          max_diameter_box_ratio=0.45)
+        mat = Materials({{"silicone": 0.18, "Al2O3": 30.0}},
+                        {{("Al2O3", "silicone"): 1e-7, ("Al2O3", "Al2O3"): 1e-7}}, "silicone")
+        before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+        import {solver}
+        {solver}.homogenize(ms, mat, tol=1e-6, store_fields=True)
+        after = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+        print(json.dumps([before, after]))
+    """)
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=600, check=True)
+    before, after = json.loads(out.stdout.strip().splitlines()[-1])
+    estimate = estimate_peak_memory((n, n, n), solver, store_fields=True, load_cases=3)
+    assert after - before < estimate < 2.5 * max(after - before, 1)

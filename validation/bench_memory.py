@@ -37,7 +37,9 @@ def main() -> None:
               for n in args.fft.split(",") if n]
     lines = ["# Peak memory per voxel (memory guard calibration)", "",
              f"Machine: {platform.platform()}, Python {platform.python_version()}. Dense 60 % "
-             "Al2O3 RVE, 3 load cases, store_fields=False, each case in a fresh process.", "",
+             "Al2O3 RVE, 3 load cases, store_fields=False, each case in a fresh process. The guard "
+             "estimates the growth (peak minus before), not the interpreter's baseline; MB = "
+             "2^20 bytes.", "",
              "| solver | dtype | grid | peak RSS (MB) | before solve (MB) | bytes/voxel | "
              "guard estimate (MB) |", "|---|---|---|---|---|---|---|"]
     for solver, n, dt in cases:
