@@ -11,14 +11,19 @@ Modules: ``materials`` (phases, resistances), ``microstructure`` (voxel images),
 ``psd`` (lognormal size distributions), ``packing`` and ``rve`` (RVE generation),
 ``model`` (the discrete model both solvers solve), ``solver`` (this reference solver),
 ``solver_common`` and ``result`` (shared by both solvers), ``warm_start``, ``analytic``,
-``vtk_output`` and ``particle_render`` (pyvista output).
+``vtk_output`` and ``particle_render`` (pyvista output), ``resources`` (the memory guard),
+``io`` (atomic writes, run manifests), ``checks`` (argument checks), ``numba_cache`` (where
+compiled kernels are cached: never inside the installed package).
 """
 
+from .checks import PhysicalScaleWarning
 from .materials import Materials
 from .microstructure import Microstructure, ParticleTable
+from .resources import InsufficientMemoryError
 from .result import ConvergenceError, HomogenizationResult
 from .solver import homogenize
 
 __all__ = ["Materials", "Microstructure", "ParticleTable", "homogenize",
-           "HomogenizationResult", "ConvergenceError"]
+           "HomogenizationResult", "ConvergenceError", "InsufficientMemoryError",
+           "PhysicalScaleWarning"]
 __version__ = "0.1.0"
