@@ -7,11 +7,16 @@ import re
 
 import numpy as np
 
-__all__ = ["finite_number", "real_number", "phase_name", "PhysicalScaleWarning"]
+__all__ = ["finite_number", "real_number", "phase_name", "PhysicalScaleWarning",
+           "VoxelContactWarning"]
 
 
 class PhysicalScaleWarning(UserWarning):
     """An input whose scale is implausible for this domain (e.g. micrometres given as metres)."""
+
+
+class VoxelContactWarning(UserWarning):
+    """A per-area contact resistance (contact="area"): its value depends on the voxel size."""
 
 #: Phase names: ASCII letters and digits, starting with a letter, with ``-`` ``+`` ``.`` allowed
 #: inside. Not ``_``: the package's flat parameter names are ``k_<phase>`` and

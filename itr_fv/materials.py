@@ -10,7 +10,10 @@ import numpy as np
 from .checks import phase_name as _check_name
 from .checks import real_number
 
-__all__ = ["Materials"]
+__all__ = ["Materials", "CONTACT_MODELS"]
+
+#: Models of the faces between two different particles (see :mod:`itr_fv.model`).
+CONTACT_MODELS = ("gap", "area")
 
 
 class Materials:
@@ -29,6 +32,23 @@ class Materials:
         carry no resistance.
     matrix : str
         Name of the matrix (continuous) phase; must be a key of ``conductivity``.
+    contact : {"area", "gap"}
+        Model of the faces between two *different* particles (see :mod:`itr_fv.model`).
+        ``"area"`` (default for now): the paper's per-area contact resistance ``R(A, B)`` of
+        the table, whose value belongs to the voxel size it was identified at (a
+        :class:`~itr_fv.checks.VoxelContactWarning` says so when contact faces exist).
+        ``"gap"`` (in development, to become the default): the two particle-matrix
+        resistances and the true matrix film between the analytic spheres,
+        ``s (R_b,p + R_b,q + d(x_f) / k_m)``; no same-pair entry is needed. Needs the
+        particle geometry (``Microstructure.from_spheres`` or ``generate_rve``). Verified on
+        simple-cubic arrays of nearly touching spheres (within 2.3 % of the multipole
+        reference at h = a/8 to a/16); on BCC and FCC arrays it still over-predicts by 2-11 %
+        at h = a/12 (``validation/results/gap_model.md``).
+    contact_conductance : mapping of (str, str) to float, optional
+        Solid contact spot per touching particle pair, W/K, by unordered pair of filler
+        phases (e.g. ``{("Al2O3", "Al2O3"): 2e-6}``): spread over that contact's faces in
+        parallel with the film, so that the total per contact does not depend on the voxel.
+        ``contact="gap"`` only.
 
     Examples
     --------
@@ -44,6 +64,8 @@ class Materials:
         conductivity: Mapping[str, float],
         resistance: Mapping[tuple[str, str], float] | None = None,
         matrix: str = "matrix",
+        contact: str = "area",
+        contact_conductance: Mapping[tuple[str, str], float] | None = None,
     ) -> None:
         if not isinstance(conductivity, Mapping) or len(conductivity) == 0:
             raise ValueError("conductivity: expected a non-empty mapping {phase name: W/(m K)}")
@@ -74,9 +96,30 @@ class Materials:
         if not isinstance(matrix, str) or matrix not in k:
             raise ValueError(f"matrix: {matrix!r} is not a phase of conductivity "
                              f"(known: {sorted(k)})")
+        if contact not in CONTACT_MODELS:
+            raise ValueError(f"contact: expected one of {CONTACT_MODELS}, got {contact!r}")
+        spots: dict[frozenset, float] = {}
+        for pair, value in (contact_conductance or {}).items():
+            if not isinstance(pair, Sequence) or isinstance(pair, str) or len(pair) != 2:
+                raise ValueError(f"contact_conductance: keys must be pairs of phase names, "
+                                 f"got {pair!r}")
+            for p in pair:
+                if _check_name(p, "contact_conductance") not in k or p == matrix:
+                    raise ValueError(f"contact_conductance[{pair!r}]: {p!r} is not a filler "
+                                     f"phase (fillers: {sorted(set(k) - {matrix})})")
+            v = real_number(value, f"contact_conductance[{pair!r}]")
+            if not math.isfinite(v) or v < 0.0:
+                raise ValueError(f"contact_conductance[{pair!r}] must be finite and >= 0 W/K, "
+                                 f"got {v!r}")
+            spots[frozenset(pair)] = v
+        if spots and contact != "gap":
+            raise ValueError("contact_conductance: contact spots belong to contact='gap'; "
+                             f"got contact={contact!r}")
         self._k = k
         self._r = r
         self.matrix = matrix
+        self.contact = contact
+        self._spots = spots
 
     # ------------------------------------------------------------------ access
     @property
@@ -97,6 +140,19 @@ class Materials:
     def phases(self) -> tuple[str, ...]:
         return tuple(self._k)
 
+    @property
+    def contact_conductance(self) -> dict[tuple[str, str], float]:
+        """Copy of the contact-spot table with sorted pair keys, W/K."""
+        out = {}
+        for key, v in self._spots.items():
+            names = sorted(key)
+            out[(names[0], names[-1])] = v
+        return out
+
+    def spot_conductance(self, a: str, b: str) -> float:
+        """Contact-spot conductance of a touching pair of phases ``a``, ``b`` (W/K; 0 if none)."""
+        return self._spots.get(frozenset((a, b)), 0.0)
+
     def resistance_between(self, a: str, b: str) -> float:
         """Resistance of the interface between phases ``a`` and ``b`` (m^2 K/W).
 
@@ -113,15 +169,21 @@ class Materials:
         return self._r[key]
 
     def with_values(self, conductivity: Mapping[str, float] | None = None,
-                    resistance: Mapping[tuple[str, str], float] | None = None) -> "Materials":
+                    resistance: Mapping[tuple[str, str], float] | None = None,
+                    contact_conductance: Mapping[tuple[str, str], float] | None = None
+                    ) -> "Materials":
         """New ``Materials`` with some values replaced (the geometry-free parameter update)."""
+        spots = self.contact_conductance
+        for pair, v in (contact_conductance or {}).items():
+            spots = {p: val for p, val in spots.items() if frozenset(p) != frozenset(pair)}
+            spots[tuple(pair)] = v
         k = dict(self._k)
         k.update(conductivity or {})
         r = self.resistance
         for pair, v in (resistance or {}).items():
             r = {p: val for p, val in r.items() if frozenset(p) != frozenset(pair)}
             r[tuple(pair)] = v
-        return Materials(k, r, self.matrix)
+        return Materials(k, r, self.matrix, contact=self.contact, contact_conductance=spots)
 
     # ----------------------------------------------------- tables for the solver
     def tables(self, names: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:
@@ -154,5 +216,6 @@ class Materials:
         return k, R
 
     def __repr__(self) -> str:
+        spots = f", contact_conductance={self.contact_conductance!r}" if self._spots else ""
         return (f"Materials(conductivity={self._k!r}, resistance={self.resistance!r}, "
-                f"matrix={self.matrix!r})")
+                f"matrix={self.matrix!r}, contact={self.contact!r}{spots})")

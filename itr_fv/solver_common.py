@@ -13,7 +13,7 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from .checks import PhysicalScaleWarning
+from .checks import PhysicalScaleWarning, VoxelContactWarning
 from .materials import Materials
 from .microstructure import Microstructure
 from .model import (
@@ -121,10 +121,17 @@ def discrete_problem(ms: Microstructure, mat: Materials, staircase: bool,
     """The system both solvers solve: geometry (reused if given), face conductances g
     (W/(m^2 K)) and the clusters cut off by insulating faces (labels, or None if none)."""
     if geometry is None:
-        geometry = face_geometry(ms, staircase)
+        geometry = face_geometry(ms, staircase, contact=mat.contact)
     elif not isinstance(geometry, FaceGeometry) or geometry.shape != ms.shape:
         raise ValueError("geometry: expected the FaceGeometry of this microstructure")
     warn_implausible_scale(ms, mat)
+    if mat.contact == "area" and geometry.n_contact_faces:
+        warnings.warn(
+            f"contact: the per-area contact resistance (contact='area') acts on "
+            f"{geometry.n_contact_faces} voxel faces between particles whose total area scales "
+            f"with the voxel ({ms.voxel_m * 1e6:.4g} um here): its value belongs to the voxel "
+            "size it was identified at. contact='gap' converges under refinement.",
+            VoxelContactWarning, stacklevel=3)
     g = geometry.conductances(mat)
     floating, labels = floating_clusters(g)
     return geometry, g, floating, labels
