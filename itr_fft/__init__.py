@@ -4,7 +4,9 @@ Public API::
 
     import itr_fft
     res = itr_fft.homogenize(ms, mat, tol=1e-8)       # same signature/result as itr_fv
-    itr_fft.choose_solver(ms.shape)                    # "itr_fv" or "itr_fft"
+
+Solver choice lives in the campaign layer (:mod:`surrogate.solver_choice`): this package
+imports the discrete problem from ``itr_fv``, never its solver.
 
 Importing the package sets ``OMP_WAIT_POLICY=PASSIVE`` unless the caller set it: numba's
 OpenMP threads otherwise spin at every barrier, and on a machine shared with other jobs
@@ -16,8 +18,6 @@ import os as _os
 
 _os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
-from .auto import choose_solver, homogenize_auto
 from .solver import FLOAT32_MIN_TOL, float32_min_tol, homogenize, reference_conductance
 
-__all__ = ["homogenize", "choose_solver", "homogenize_auto", "reference_conductance",
-           "FLOAT32_MIN_TOL", "float32_min_tol"]
+__all__ = ["homogenize", "reference_conductance", "FLOAT32_MIN_TOL", "float32_min_tol"]

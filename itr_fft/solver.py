@@ -37,14 +37,15 @@ from itr_fv import resources
 from itr_fv.materials import Materials
 from itr_fv.microstructure import Microstructure
 from itr_fv.model import FaceGeometry
+from itr_fv.problem import DiscreteProblem
 from itr_fv.result import HomogenizationResult
 from itr_fv.solver_common import (
     Callback,
     SolveRecord,
+    as_problem,
     build_result,
     check_solver_args,
     check_x0,
-    discrete_problem,
 )
 
 from . import _kernels as K
@@ -138,8 +139,10 @@ class _Preconditioner:
 
 def _pcg(g: np.ndarray, d: int, h: float, x: np.ndarray, M: _Preconditioner, tol: float,
          maxiter: int, callback: Callback | None, labels_flat: np.ndarray | None,
-         counts: np.ndarray | None) -> tuple[int, list[float], float]:
-    """Solve A x = b(e_d) in place from the start x; returns (iterations, history, residual).
+         counts: np.ndarray | None) -> tuple[int, list[float], float, int]:
+    """Solve A x = b(e_d) in place from the start x.
+
+    Returns (iterations, residual history, final true residual, restarts).
 
     The recursive residual drives the iteration; whenever it reaches ``tol`` the true
     residual ||b - A x|| / ||b|| (float64) is checked and CG restarts from x if it is above.
@@ -149,7 +152,7 @@ def _pcg(g: np.ndarray, d: int, h: float, x: np.ndarray, M: _Preconditioner, tol
     normb = math.sqrt(K.load_into(g, d, h, r))
     if normb == 0.0:  # no heterogeneity along e_d: theta = 0 solves it exactly
         x[...] = 0.0
-        return 0, [0.0], 0.0
+        return 0, [0.0], 0.0, 0
     history: list[float] = []
     it = 0
     restarts = 0
@@ -203,10 +206,10 @@ def _pcg(g: np.ndarray, d: int, h: float, x: np.ndarray, M: _Preconditioner, tol
             restarts += 1  # breakdown above tolerance: restart from x
     if history:
         history[-1] = true_res
-    return it, history, true_res
+    return it, history, true_res, restarts
 
 
-def homogenize(ms: Microstructure, mat: Materials, tol: float = 1e-8,
+def homogenize(ms: Microstructure | DiscreteProblem, mat: Materials, tol: float = 1e-8,
                maxiter: int | None = None, directions: Sequence[int] = (0, 1, 2),
                staircase: bool = True, callback: Callback | None = None,
                x0: np.ndarray | None = None, strict: bool = True, store_fields: bool = True,
@@ -217,8 +220,9 @@ def homogenize(ms: Microstructure, mat: Materials, tol: float = 1e-8,
 
     Parameters
     ----------
-    ms : Microstructure
-        Voxel image with particle ids.
+    ms : Microstructure or DiscreteProblem
+        Voxel image with particle ids, or its :class:`~itr_fv.problem.DiscreteProblem`
+        (geometry built once, reused for many parameter sets).
     mat : Materials
         Conductivities (W/(m K)) and interface resistances (m^2 K/W).
     tol : float
@@ -269,9 +273,12 @@ def homogenize(ms: Microstructure, mat: Materials, tol: float = 1e-8,
     -------
     HomogenizationResult
         ``solver == "itr_fft"``; ``info`` holds ``g_ref`` (W/(m^2 K)), ``dtype``,
-        ``workers``, ``restarts``.
+        ``workers``, ``restarts`` (CG restarts per load case), ``contact`` (the contact
+        model) and face counts.
     """
     t0 = time.perf_counter()
+    problem = ms if isinstance(ms, DiscreteProblem) else None
+    ms = problem.microstructure if problem is not None else ms
     tol, maxiter, dirs = check_solver_args(ms, mat, tol, maxiter, directions, callback, 3000)
     dt = np.dtype(dtype)
     if dt not in (np.dtype(np.float64), np.dtype(np.float32)):
@@ -288,7 +295,10 @@ def homogenize(ms: Microstructure, mat: Materials, tol: float = 1e-8,
     if check_memory:
         resources.check_memory(ms.shape, "itr_fft", dtype=dt.name, store_fields=store_fields,
                                load_cases=len(dirs))
-    geometry, g, floating, labels = discrete_problem(ms, mat, staircase, geometry)
+    problem = as_problem(problem or ms, mat, staircase, geometry)
+    geometry = problem.geometry
+    system = problem.system(mat)
+    g, floating, labels = system.g, system.floating, system.labels
     labels_flat = counts = None
     if labels is not None:
         labels_flat = np.ascontiguousarray(labels.ravel(), dtype=np.int32)
@@ -303,21 +313,26 @@ def homogenize(ms: Microstructure, mat: Materials, tol: float = 1e-8,
     h = ms.voxel_m
     setup = time.perf_counter() - t0
     records = []
+    restarts = []
     old_threads = numba.get_num_threads()
     numba.set_num_threads(workers)
     try:
         for c, d in enumerate(dirs):
             t1 = time.perf_counter()
             x = np.zeros(ms.shape, dtype=dt) if x0 is None else x0[c].astype(dt, copy=True)
-            it, history, res = _pcg(g, d, h, x, M, tol, maxiter, callback, labels_flat,
-                                    counts)
+            it, history, res, rs = _pcg(g, d, h, x, M, tol, maxiter, callback, labels_flat,
+                                        counts)
+            restarts.append(rs)
             theta = x if dt == np.float64 else x.astype(np.float64)
             records.append(SolveRecord(d, theta, it, history, res, time.perf_counter() - t1))
     finally:
         numba.set_num_threads(old_threads)
     info = {"g_ref": g_ref, "k_ref": g_ref * h, "dtype": dt.name, "fft_dtype": fdt.name,
-            "workers": workers,
+            "workers": workers, "restarts": restarts,
             "unknowns": int(np.prod(ms.shape)),
-            "interface_faces": geometry.n_interface_faces, "staircase": geometry.staircase}
-    return build_result(ms, g, records, labels, floating, tol, setup,
-                        time.perf_counter() - t0, "itr_fft", store_fields, strict, info)
+            "interface_faces": geometry.n_interface_faces,
+            "contact_faces": geometry.n_contact_faces, "contact": problem.contact,
+            "staircase": geometry.staircase}
+    return build_result(ms, g, records, labels=labels, floating=floating, tol=tol,
+                        setup_time=setup, wall_time=time.perf_counter() - t0, solver="itr_fft",
+                        store_fields=store_fields, strict=strict, info=info)

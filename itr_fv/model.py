@@ -48,7 +48,8 @@ from .microstructure import Microstructure
 DEFAULT_TOUCH_GAP_M = 5e-9
 
 __all__ = [
-    "DEFAULT_TOUCH_GAP_M", "FaceGeometry", "face_geometry", "fill_thin_films", "face_conductances", "load_vector",
+    "DEFAULT_TOUCH_GAP_M", "FaceGeometry", "face_geometry", "fill_thin_films",
+    "face_conductances", "load_vector",
     "apply_operator",
     "face_fluxes", "mean_flux", "energy_tensor", "connected_components", "cell_centres",
 ]

@@ -14,14 +14,15 @@ from . import resources
 from .materials import Materials
 from .microstructure import Microstructure
 from .model import FaceGeometry, load_vector
+from .problem import DiscreteProblem
 from .result import HomogenizationResult
 from .solver_common import (
     Callback,
     SolveRecord,
+    as_problem,
     build_result,
     check_solver_args,
     check_x0,
-    discrete_problem,
 )
 
 __all__ = ["homogenize", "assemble_operator"]
@@ -101,7 +102,7 @@ def _amg_hierarchy(A: scipy.sparse.csr_array, amg: str) -> pyamg.multilevel.Mult
                                              symmetry="symmetric", max_coarse=400)
 
 
-def homogenize(ms: Microstructure, mat: Materials, tol: float = 1e-8,
+def homogenize(ms: Microstructure | DiscreteProblem, mat: Materials, tol: float = 1e-8,
                maxiter: int | None = None, directions: Sequence[int] = (0, 1, 2),
                staircase: bool = True, callback: Callback | None = None,
                x0: np.ndarray | None = None, strict: bool = True, store_fields: bool = True,
@@ -115,8 +116,9 @@ def homogenize(ms: Microstructure, mat: Materials, tol: float = 1e-8,
 
     Parameters
     ----------
-    ms : Microstructure
-        Voxel image with particle ids.
+    ms : Microstructure or DiscreteProblem
+        Voxel image with particle ids, or its :class:`~itr_fv.problem.DiscreteProblem`
+        (geometry built once, reused for many parameter sets).
     mat : Materials
         Conductivities (W/(m K)) and interface resistances (m^2 K/W).
     tol : float
@@ -150,9 +152,13 @@ def homogenize(ms: Microstructure, mat: Materials, tol: float = 1e-8,
     Returns
     -------
     HomogenizationResult
-        ``k_eff`` in W/(m K), iterations, residuals, fields, times.
+        ``k_eff`` in W/(m K), iterations, residuals, fields, times; ``info`` holds the AMG
+        hierarchy's levels and complexity, ``restarts`` (CG restarts per load case),
+        ``contact`` (the contact model) and face counts.
     """
     t0 = time.perf_counter()
+    problem = ms if isinstance(ms, DiscreteProblem) else None
+    ms = problem.microstructure if problem is not None else ms
     tol, maxiter, dirs = check_solver_args(ms, mat, tol, maxiter, directions, callback, 500)
     if amg not in _AMG:
         raise ValueError(f"amg: expected one of {sorted(_AMG)}, got {amg!r}")
@@ -160,7 +166,10 @@ def homogenize(ms: Microstructure, mat: Materials, tol: float = 1e-8,
     if check_memory:
         resources.check_memory(ms.shape, "itr_fv", store_fields=store_fields,
                                load_cases=len(dirs))
-    geometry, g, floating, labels = discrete_problem(ms, mat, staircase, geometry)
+    problem = as_problem(problem or ms, mat, staircase, geometry)
+    geometry = problem.geometry
+    system = problem.system(mat)
+    g, floating, labels = system.g, system.floating, system.labels
     if labels is None:
         pins = np.array([0])
     else:
@@ -171,6 +180,7 @@ def homogenize(ms: Microstructure, mat: Materials, tol: float = 1e-8,
     M = ml.aspreconditioner(cycle="V")
     setup = time.perf_counter() - t0
     records = []
+    restarts = []
     for c, d in enumerate(dirs):
         t1 = time.perf_counter()
         E = np.zeros(3)
@@ -181,6 +191,7 @@ def homogenize(ms: Microstructure, mat: Materials, tol: float = 1e-8,
         if normb == 0.0:
             theta = np.zeros(ms.shape)
             records.append(SolveRecord(d, theta, 0, [0.0], 0.0, time.perf_counter() - t1))
+            restarts.append(0)
             continue
         start = np.zeros_like(b) if x0 is None else x0[c].ravel().copy()
         start[pins] = 0.0
@@ -195,17 +206,22 @@ def homogenize(ms: Microstructure, mat: Materials, tol: float = 1e-8,
         x, res = start, history[0]
         # CG's recursive residual can drift below the true one near round-off: restart
         # from the current iterate (at most 3 times) until the true residual meets tol.
+        runs = 0
         for _restart in range(4):
             if res <= tol or len(history) - 1 >= maxiter:
                 break
+            runs += 1
             x, _info = pyamg.krylov.cg(Ap, b, x0=x, tol=tol, maxiter=maxiter - len(history) + 1,
                                        M=M, callback=_cb, residuals=raw)
             res = float(np.linalg.norm(b - Ap @ x)) / normb
         records.append(SolveRecord(d, x.reshape(ms.shape), len(history) - 1, history, res,
                                    time.perf_counter() - t1))
+        restarts.append(max(runs - 1, 0))
     info = {"amg": amg, "amg_levels": len(ml.levels),
             "operator_complexity": float(ml.operator_complexity()),
             "unknowns": int(A.shape[0]), "interface_faces": geometry.n_interface_faces,
-            "staircase": geometry.staircase}
-    return build_result(ms, g, records, labels, floating, tol, setup,
-                        time.perf_counter() - t0, "itr_fv", store_fields, strict, info)
+            "contact_faces": geometry.n_contact_faces, "contact": problem.contact,
+            "staircase": geometry.staircase, "restarts": restarts}
+    return build_result(ms, g, records, labels=labels, floating=floating, tol=tol,
+                        setup_time=setup, wall_time=time.perf_counter() - t0, solver="itr_fv",
+                        store_fields=store_fields, strict=strict, info=info)

@@ -13,22 +13,19 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from .checks import PhysicalScaleWarning, VoxelContactWarning
 from .materials import Materials
 from .microstructure import Microstructure
 from .model import (
     FaceGeometry,
     cell_centres,
-    connected_components,
     energy_tensor,
     face_fluxes,
-    face_geometry,
     mean_flux,
 )
+from .problem import DiscreteProblem
 from .result import ConvergenceError, FloatingClusters, HomogenizationResult
 
-__all__ = ["check_solver_args", "check_x0", "discrete_problem", "SolveRecord", "build_result",
-           "floating_clusters"]
+__all__ = ["check_solver_args", "check_x0", "as_problem", "SolveRecord", "build_result"]
 
 Callback = Callable[[int, int, float], None]
 
@@ -82,59 +79,15 @@ def check_x0(x0: np.ndarray | None, shape: tuple[int, int, int],
     return x0
 
 
-def floating_clusters(g: np.ndarray) -> tuple[FloatingClusters, np.ndarray | None]:
-    """Clusters cut off by insulating faces; returns the summary and the labels (or None)."""
-    if np.all(g > 0):
-        return FloatingClusters(0, np.zeros(0, dtype=np.int64), 0.0), None
-    n, labels = connected_components(g)
-    if n == 1:
-        return FloatingClusters(0, np.zeros(0, dtype=np.int64), 0.0), None
-    sizes = np.bincount(labels.ravel(), minlength=n)
-    return FloatingClusters(n - 1, sizes[1:], float(sizes[1:].sum() / labels.size)), labels
-
-
-#: Voxels above this edge (m) with a finite interface resistance warn: this package's domain
-#: is particle-filled composites with micrometre fillers, and a resistance in m^2 K/W
-#: only means something against voxels in metres.
-IMPLAUSIBLE_VOXEL_M = 1e-3
-
-
-def warn_implausible_scale(ms: Microstructure, mat: Materials) -> None:
-    """Warn (:class:`PhysicalScaleWarning`) when the voxel is above 1 mm and an interface
-    resistance is finite and positive: most often micrometres passed as metres."""
-    h = ms.voxel_m
-    if h <= IMPLAUSIBLE_VOXEL_M:
-        return
-    finite = [v for v in mat.resistance.values() if 0.0 < v < math.inf]
-    if finite:
-        warnings.warn(
-            f"voxel_m: the voxel edge is {h:.4g} m (> 1 mm) while interface resistances are "
-            f"finite (up to {max(finite):.3g} m^2 K/W). Lengths are in metres: if {h:.4g} was "
-            f"meant in micrometres, the voxel is voxel_m={h * 1e-6:.4g}. Taken as metres, the "
-            "interfaces weigh ~1e6 times too little and k_eff comes out too high.",
-            PhysicalScaleWarning, stacklevel=4)
-
-
-def discrete_problem(ms: Microstructure, mat: Materials, staircase: bool,
-                     geometry: FaceGeometry | None
-                     ) -> tuple[FaceGeometry, np.ndarray, FloatingClusters, np.ndarray | None]:
-    """The system both solvers solve: geometry (reused if given), face conductances g
-    (W/(m^2 K)) and the clusters cut off by insulating faces (labels, or None if none)."""
-    if geometry is None:
-        geometry = face_geometry(ms, staircase, contact=mat.contact)
-    elif not isinstance(geometry, FaceGeometry) or geometry.shape != ms.shape:
-        raise ValueError("geometry: expected the FaceGeometry of this microstructure")
-    warn_implausible_scale(ms, mat)
-    if mat.contact == "area" and geometry.n_contact_faces:
-        warnings.warn(
-            f"contact: the per-area contact resistance (contact='area') acts on "
-            f"{geometry.n_contact_faces} voxel faces between particles whose total area scales "
-            f"with the voxel ({ms.voxel_m * 1e6:.4g} um here): its value belongs to the voxel "
-            "size it was identified at. contact='gap' converges under refinement.",
-            VoxelContactWarning, stacklevel=3)
-    g = geometry.conductances(mat)
-    floating, labels = floating_clusters(g)
-    return geometry, g, floating, labels
+def as_problem(ms: Microstructure | DiscreteProblem, mat: Materials, staircase: bool,
+               geometry: FaceGeometry | None) -> DiscreteProblem:
+    """The :class:`DiscreteProblem` a solver works on: ``ms`` itself if it is one (then
+    ``geometry`` must be None and its contact model that of ``mat``), else built here."""
+    if isinstance(ms, DiscreteProblem):
+        if geometry is not None:
+            raise ValueError("geometry: a DiscreteProblem already holds its geometry")
+        return ms
+    return DiscreteProblem.for_materials(ms, mat, staircase, geometry)
 
 
 def remove_cluster_means(theta: np.ndarray, labels: np.ndarray | None) -> np.ndarray:
@@ -163,7 +116,7 @@ class SolveRecord:
         self.seconds = seconds
 
 
-def build_result(ms: Microstructure, g: np.ndarray, records: list[SolveRecord],
+def build_result(ms: Microstructure, g: np.ndarray, records: list[SolveRecord], *,
                  labels: np.ndarray | None, floating: FloatingClusters, tol: float,
                  setup_time: float, wall_time: float, solver: str, store_fields: bool,
                  strict: bool, info: dict | None = None) -> HomogenizationResult:

@@ -144,3 +144,27 @@ def test_with_values_keeps_the_contact_model():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         assert "contact='gap'" in repr(new)
+
+
+def test_one_discrete_problem_serves_many_parameter_sets():
+    from itr_fv.problem import DiscreteProblem
+
+    ms, _ = sc_cell(10e-9, 8)
+    problem = DiscreteProblem(ms, contact="gap")
+    for rb in (2e-8, 1e-7):
+        mat = gap_materials(rb=rb)
+        reused = itr_fft.homogenize(problem, mat, tol=1e-10)
+        fresh = itr_fft.homogenize(ms, mat, tol=1e-10)
+        np.testing.assert_allclose(reused.k_eff, fresh.k_eff, rtol=1e-12)
+        assert reused.info["contact"] == "gap"
+        assert len(reused.info["restarts"]) == 3
+        assert all(isinstance(r, int) and 0 <= r <= 5 for r in reused.info["restarts"])
+        fv = itr_fv.homogenize(problem, mat, tol=1e-10)
+        np.testing.assert_allclose(fv.k_eff, fresh.k_eff, rtol=1e-6, atol=1e-9)
+    with pytest.raises(ValueError, match="mat: uses contact='area'"):
+        itr_fft.homogenize(problem, Materials({"silicone": K_M, "Al2O3": 30.0},
+                                              {("Al2O3", "silicone"): 2e-8}, "silicone"))
+    with pytest.raises(ValueError, match="geometry: a DiscreteProblem already holds"):
+        itr_fft.homogenize(problem, gap_materials(), geometry=problem.geometry)
+    with pytest.raises(ValueError, match="contact: expected one of"):
+        DiscreteProblem(ms, contact="film")

@@ -46,16 +46,14 @@ def test_solvers_refuse_before_any_work_and_can_be_told_to_go_ahead(solve, monke
     ms = sc_sphere(12, 0.2)
     calls = []
     monkeypatch.setattr(resources, "available_memory", lambda: 1000)  # 1 kB left
-    import itr_fv.solver_common as common
-    real = common.discrete_problem
+    import itr_fv.problem
+    real = itr_fv.problem.face_geometry
 
     def spy(*args, **kwargs):
         calls.append(1)
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(common, "discrete_problem", spy)
-    monkeypatch.setattr(itr_fv.solver, "discrete_problem", spy)
-    monkeypatch.setattr(itr_fft.solver, "discrete_problem", spy)
+    monkeypatch.setattr(itr_fv.problem, "face_geometry", spy)
     with pytest.raises(InsufficientMemoryError, match="12x12x12"):
         solve(ms, MAT, tol=1e-8)
     assert calls == []  # refused before the geometry was built

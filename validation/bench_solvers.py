@@ -44,7 +44,7 @@ def _rss_mb() -> float:
 
 def one(solver: str, n: int, dtype: str = "float64") -> dict:
     """Solve CASE at n^3 with ``solver``; returns times, iterations, peak RSS (MB)."""
-    from validation.rve_set import build
+    from itr_fv.gallery import build
     t = time.perf_counter()
     ms, mat = build(CASE, n)
     t_build = time.perf_counter() - t
@@ -53,7 +53,7 @@ def one(solver: str, n: int, dtype: str = "float64") -> dict:
         import itr_fft
 
         # compile/load the kernels outside the timing (cache=True makes this a load)
-        from validation.rve_set import build as _b
+        from itr_fv.gallery import build as _b
         ms8, mat8 = _b(CASE, 16)
         itr_fft.homogenize(ms8, mat8, tol=1e-6, store_fields=False, dtype=np.dtype(dtype).type)
         rss_build = max(rss_build, _rss_mb())
@@ -86,7 +86,7 @@ def studies(n_grid: tuple[int, int] = (64, 128)) -> dict:
     """Iterations vs grid, reference conductivity, warm start, profile (in this process)."""
     import itr_fft
     import itr_fv
-    from validation.rve_set import build, sphere_array
+    from itr_fv.gallery import build, sphere_array
     out: dict = {}
     # iterations vs grid for fixed spheres (FCC f = 0.5 and the dense RVE)
     grid = []

@@ -1,4 +1,5 @@
-"""The common RVE set of the FV-vs-FFT cross-validation (defined once, used by tests,
+"""Standard microstructures for tests and studies: the common RVE set of the FV-vs-FFT
+cross-validation and the lattice builders (defined once, used by the tests,
 ``validation/crossval.py`` and ``validation/bench_solvers.py``).
 
 Every entry builds a (Microstructure, Materials) pair at a requested grid size; the
@@ -20,7 +21,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from itr_fv import Materials, Microstructure
+from .materials import Materials
+from .microstructure import Microstructure
 
 __all__ = ["RVECase", "rve_cases", "build", "K_SILICONE", "K_AL2O3", "K_ALN", "PSD"]
 
@@ -236,9 +238,41 @@ def rve_cases() -> list[RVECase]:
     ]
 
 
-def build(name: str, size: str | int = "ci") -> tuple[Microstructure, Materials]:
-    """(Microstructure, Materials) of the case called ``name``."""
+def with_contact(mat: Materials, contact: str,
+                 contact_conductance: dict | None = None) -> Materials:
+    """The same materials under another contact model (``"area"`` or ``"gap"``).
+
+    For ``"gap"`` the same-phase and filler-filler pairs are dropped (the gap model takes
+    the particle-matrix resistances and the film instead).
+    """
+    if contact == mat.contact and not contact_conductance:
+        return mat
+    resistance = mat.resistance
+    if contact == "gap":
+        resistance = {p: v for p, v in resistance.items() if mat.matrix in p}
+    return Materials(mat.conductivity, resistance, mat.matrix, contact=contact,
+                     contact_conductance=contact_conductance)
+
+
+def build(name: str, size: str | int = "ci", contact: str | None = None,
+          contact_conductance: dict | None = None) -> tuple[Microstructure, Materials]:
+    """(Microstructure, Materials) of the case called ``name``.
+
+    Parameters
+    ----------
+    name : str
+        A case of :func:`rve_cases`.
+    size : "ci", "full" or int
+        Grid: the case's CI or full size, or voxels per edge.
+    contact : {"area", "gap"}, optional
+        Contact model (default: the case's own, ``"area"``); see :func:`with_contact`.
+    contact_conductance : dict, optional
+        Contact spots (W/K per filler pair) with ``contact="gap"``.
+    """
     for case in rve_cases():
         if case.name == name:
-            return case.build(size)
+            ms, mat = case.build(size)
+            if contact is not None:
+                mat = with_contact(mat, contact, contact_conductance)
+            return ms, mat
     raise ValueError(f"name: unknown RVE {name!r}")

@@ -1,4 +1,5 @@
-"""Pick the cheaper solver for a grid, from the measured crossover.
+"""Pick the cheaper solver for a grid, from the measured crossover (the campaign layer's
+choice: ``itr_fft`` knows nothing of ``itr_fv``'s solver).
 
 Measured (validation/results/crossval.md, bench_solvers.md; shared 2-core machine):
 itr_fft was faster than itr_fv at every size tried -- 24^3 (0.1-0.3 s vs 0.6-20 s),
@@ -27,12 +28,15 @@ def choose_solver(shape: int | Sequence[int]) -> str:
 
 
 def homogenize_auto(ms, mat, **kwargs):
-    """Dispatch to :func:`itr_fv.homogenize` or :func:`itr_fft.homogenize` by grid size."""
+    """Dispatch to :func:`itr_fv.homogenize` or :func:`itr_fft.homogenize` by grid size.
+
+    ``ms`` may be a Microstructure or a DiscreteProblem; the FFT solver's own options
+    (``dtype``, ``workers``, ``reference``, ``fft_dtype``) are dropped for itr_fv.
+    """
     if choose_solver(ms.shape) == "itr_fv":
         import itr_fv
-        kwargs.pop("dtype", None)
-        kwargs.pop("workers", None)
-        kwargs.pop("reference", None)
+        for option in ("dtype", "workers", "reference", "fft_dtype"):
+            kwargs.pop(option, None)
         return itr_fv.homogenize(ms, mat, **kwargs)
-    from .solver import homogenize
-    return homogenize(ms, mat, **kwargs)
+    import itr_fft
+    return itr_fft.homogenize(ms, mat, **kwargs)

@@ -1,0 +1,162 @@
+"""The discrete problem of one RVE: geometry and contact model once, values per parameter set.
+
+A :class:`DiscreteProblem` holds what does not change when conductivities and resistances
+change: the microstructure, its interface faces with their staircase factors, contact pairs
+and film thicknesses (:class:`~itr_fv.model.FaceGeometry`) and the contact model. For every
+parameter set :meth:`DiscreteProblem.system` gives the face conductances and the clusters
+that insulating interfaces cut off. Both solvers take a problem in place of a
+microstructure, so a campaign builds it once per RVE::
+
+    problem = DiscreteProblem(ms, contact="gap")
+    for mat in parameter_sets:
+        res = itr_fft.homogenize(problem, mat)
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+
+from .checks import PhysicalScaleWarning, VoxelContactWarning
+from .materials import CONTACT_MODELS, Materials
+from .microstructure import Microstructure
+from .model import DEFAULT_TOUCH_GAP_M, FaceGeometry, connected_components, face_geometry
+from .result import FloatingClusters
+
+__all__ = ["DiscreteProblem", "DiscreteSystem", "floating_clusters", "IMPLAUSIBLE_VOXEL_M"]
+
+#: Voxels above this edge (m) with a finite interface resistance warn: this package's domain
+#: is particle-filled composites with micrometre fillers, and a resistance in m^2 K/W
+#: only means something against voxels in metres.
+IMPLAUSIBLE_VOXEL_M = 1e-3
+
+
+@dataclass(frozen=True)
+class DiscreteSystem:
+    """The values of the discrete system for one parameter set.
+
+    Attributes
+    ----------
+    g : ndarray, shape (3, n1, n2, n3)
+        Face conductances per unit area, W/(m^2 K).
+    floating : FloatingClusters
+        Clusters cut off by insulating faces.
+    labels : ndarray of int32 or None
+        Connected component of every voxel (None when the grid is connected).
+    """
+
+    g: np.ndarray
+    floating: FloatingClusters
+    labels: np.ndarray | None
+
+
+def floating_clusters(g: np.ndarray) -> tuple[FloatingClusters, np.ndarray | None]:
+    """Clusters cut off by insulating faces; returns the summary and the labels (or None)."""
+    if np.all(g > 0):
+        return FloatingClusters(0, np.zeros(0, dtype=np.int64), 0.0), None
+    n, labels = connected_components(g)
+    if n == 1:
+        return FloatingClusters(0, np.zeros(0, dtype=np.int64), 0.0), None
+    sizes = np.bincount(labels.ravel(), minlength=n)
+    return FloatingClusters(n - 1, sizes[1:], float(sizes[1:].sum() / labels.size)), labels
+
+
+class DiscreteProblem:
+    """Geometry and contact model of one RVE, reused for any number of parameter sets.
+
+    Parameters
+    ----------
+    ms : Microstructure
+        The voxel image (with its particle table for ``contact="gap"``).
+    contact : {"area", "gap"}
+        Contact model; the materials given to :meth:`system` must use the same.
+    staircase : bool
+        Staircase correction of the interface resistances.
+    touch_gap_m : float
+        Pairs closer than this (m) touch and carry contact spots (``contact="gap"``).
+    geometry : FaceGeometry, optional
+        A precomputed geometry of ``ms`` for this contact model.
+    """
+
+    def __init__(self, ms: Microstructure, *, contact: str = "area", staircase: bool = True,
+                 touch_gap_m: float = DEFAULT_TOUCH_GAP_M,
+                 geometry: FaceGeometry | None = None) -> None:
+        if not isinstance(ms, Microstructure):
+            raise ValueError(f"ms: expected a Microstructure, got {type(ms).__name__}")
+        if contact not in CONTACT_MODELS:
+            raise ValueError(f"contact: expected one of {CONTACT_MODELS}, got {contact!r}")
+        if geometry is None:
+            geometry = face_geometry(ms, staircase, contact=contact, touch_gap_m=touch_gap_m)
+        elif not isinstance(geometry, FaceGeometry) or geometry.shape != ms.shape:
+            raise ValueError("geometry: expected the FaceGeometry of this microstructure")
+        elif geometry.contact_model != contact:
+            raise ValueError(f"geometry: built for contact={geometry.contact_model!r}, not "
+                             f"{contact!r}")
+        self.microstructure = ms
+        self.geometry = geometry
+        self.contact = contact
+
+    @classmethod
+    def for_materials(cls, ms: Microstructure, mat: Materials, staircase: bool = True,
+                      geometry: FaceGeometry | None = None) -> "DiscreteProblem":
+        """The problem of ``ms`` under the contact model of ``mat``."""
+        if not isinstance(mat, Materials):
+            raise ValueError(f"mat: expected a Materials object, got {type(mat).__name__}")
+        if geometry is not None and isinstance(geometry, FaceGeometry) \
+                and geometry.contact_model != mat.contact:
+            raise ValueError(f"geometry: built for contact={geometry.contact_model!r}, but the "
+                             f"materials use contact={mat.contact!r}")
+        return cls(ms, contact=mat.contact, staircase=staircase, geometry=geometry)
+
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        return self.microstructure.shape
+
+    @property
+    def voxel_m(self) -> float:
+        return self.microstructure.voxel_m
+
+    def system(self, mat: Materials) -> DiscreteSystem:
+        """Face conductances and floating clusters for the parameter set ``mat``.
+
+        Warns (:class:`~itr_fv.checks.PhysicalScaleWarning`) for voxels above 1 mm with a
+        finite interface resistance, and (:class:`~itr_fv.checks.VoxelContactWarning`) when
+        the per-area contact model acts on contact faces.
+        """
+        if not isinstance(mat, Materials):
+            raise ValueError(f"mat: expected a Materials object, got {type(mat).__name__}")
+        if mat.contact != self.contact:
+            raise ValueError(f"mat: uses contact={mat.contact!r}, but the problem was built "
+                             f"for contact={self.contact!r}")
+        self._warn_scale(mat)
+        if self.contact == "area" and self.geometry.n_contact_faces:
+            warnings.warn(
+                f"contact: the per-area contact resistance (contact='area') acts on "
+                f"{self.geometry.n_contact_faces} voxel faces between particles whose total "
+                f"area scales with the voxel ({self.voxel_m * 1e6:.4g} um here): its value "
+                "belongs to the voxel size it was identified at. contact='gap' converges "
+                "under refinement.", VoxelContactWarning, stacklevel=4)
+        g = self.geometry.conductances(mat)
+        floating, labels = floating_clusters(g)
+        return DiscreteSystem(g, floating, labels)
+
+    def _warn_scale(self, mat: Materials) -> None:
+        h = self.voxel_m
+        if h <= IMPLAUSIBLE_VOXEL_M:
+            return
+        finite = [v for v in mat.resistance.values() if 0.0 < v < math.inf]
+        if finite:
+            warnings.warn(
+                f"voxel_m: the voxel edge is {h:.4g} m (> 1 mm) while interface resistances "
+                f"are finite (up to {max(finite):.3g} m^2 K/W). Lengths are in metres: if "
+                f"{h:.4g} was meant in micrometres, the voxel is voxel_m={h * 1e-6:.4g}. Taken "
+                "as metres, the interfaces weigh ~1e6 times too little and k_eff comes out too "
+                "high.", PhysicalScaleWarning, stacklevel=5)
+
+    def __repr__(self) -> str:
+        return (f"DiscreteProblem({self.microstructure!r}, contact={self.contact!r}, "
+                f"{self.geometry.n_interface_faces} interface faces, "
+                f"{self.geometry.n_contact_faces} contact faces)")
