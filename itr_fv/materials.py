@@ -16,6 +16,15 @@ __all__ = ["Materials", "CONTACT_MODELS"]
 CONTACT_MODELS = ("gap", "area")
 
 
+def _sorted_pairs(table: dict[frozenset, float]) -> dict[tuple[str, str], float]:
+    """{frozenset pair: value} as {(first, second) in sorted order: value}."""
+    out = {}
+    for key, v in table.items():
+        names = sorted(key)
+        out[(names[0], names[-1])] = v
+    return out
+
+
 class Materials:
     """Conductivity of every phase and resistance of every interface type.
 
@@ -130,11 +139,7 @@ class Materials:
     @property
     def resistance(self) -> dict[tuple[str, str], float]:
         """Copy of the resistance table with sorted pair keys, m^2 K/W."""
-        out = {}
-        for key, v in self._r.items():
-            names = sorted(key)
-            out[(names[0], names[-1])] = v
-        return out
+        return _sorted_pairs(self._r)
 
     @property
     def phases(self) -> tuple[str, ...]:
@@ -143,11 +148,7 @@ class Materials:
     @property
     def contact_conductance(self) -> dict[tuple[str, str], float]:
         """Copy of the contact-spot table with sorted pair keys, W/K."""
-        out = {}
-        for key, v in self._spots.items():
-            names = sorted(key)
-            out[(names[0], names[-1])] = v
-        return out
+        return _sorted_pairs(self._spots)
 
     def spot_conductance(self, a: str, b: str) -> float:
         """Contact-spot conductance of a touching pair of phases ``a``, ``b`` (W/K; 0 if none)."""
