@@ -129,7 +129,8 @@ def run_demo(settings: DemoSettings, out: Path, echo=print) -> list[Path]:
     png = res.render_png(out / "demo.png")
     summary = {"k_eff_W_per_mK": res.k_eff.tolist(), "k_iso_W_per_mK": k_iso,
                "iterations": res.iterations, "volume_fractions": ms.volume_fractions(),
-               "solver": res.solver, "settings": asdict(settings),
+               "solver": res.solver, "contact_model": res.info.get("contact"),
+               "settings": asdict(settings),
                "discretisation_note": bias_note(settings.voxel_um),
                "scatter_note": scatter_note(settings),
                "rve_scatter_percent": DEMO_SCATTER}

@@ -63,7 +63,8 @@ def to_image_data(result: "HomogenizationResult", *, load_cases: Sequence[int] |
     E = e_1, e_2, e_3 of 1 K/m) ``temperature_eN`` (K), ``temperature_fluctuation_eN``
     (theta = T + E.x, K), ``flux_magnitude_eN`` (W/m^2) and, with ``vectors``, ``flux_eN``
     (W/m^2); the first case's temperature is the active scalar. Field data: ``k_eff``
-    (W/(m K), float64), ``phase_names`` and ``load_directions``.
+    (W/(m K), float64), ``phase_names``, ``load_directions``, ``contact_model`` and
+    ``solver``.
 
     Parameters
     ----------
@@ -110,6 +111,8 @@ def to_image_data(result: "HomogenizationResult", *, load_cases: Sequence[int] |
     grid.field_data["k_eff"] = result.k_eff.ravel()
     grid.field_data["phase_names"] = np.array(ms.names)
     grid.field_data["load_directions"] = np.array([result.directions[c] + 1 for c in cases])
+    grid.field_data["contact_model"] = np.array([str(result.info.get("contact", "unknown"))])
+    grid.field_data["solver"] = np.array([str(result.solver)])
     grid.cell_data.active_scalars_name = f"temperature_e{result.directions[cases[0]] + 1}"
     return grid
 
