@@ -298,6 +298,12 @@ def _contact_films(table, p_lo: np.ndarray, p_hi: np.ndarray, x_face: np.ndarray
     return np.maximum(film, np.maximum(gap0, 0.0)), gap0, shift
 
 
+def _particle_material_ids(ms: Microstructure) -> np.ndarray:
+    """Material id of every particle id (index 0: the matrix), from the particle table."""
+    return np.concatenate([[0], [ms.names.index(m) for m in ms.particles.material]]
+                          ).astype(np.int64)
+
+
 def _wedge_radius(dist: float, ra: float, rb: float, h: float) -> float:
     """Largest distance rho from the line of centres at which the film is at most h."""
     def film(rho: float) -> float:
@@ -342,7 +348,7 @@ def fill_thin_films(ms: Microstructure) -> tuple[np.ndarray, np.ndarray, int]:
     box = np.array(shape, dtype=np.float64) * h
     c = np.mod(table.centers_m, box)
     r = table.radii_m
-    mat_of = np.concatenate([[0], [ms.names.index(m) for m in table.material]]).astype(mid.dtype)
+    mat_of = _particle_material_ids(ms).astype(mid.dtype)
     reach = 2.0 * float(r.max()) + h
     todo = []
     if reach < 0.5 * float(box.min()):
@@ -426,10 +432,9 @@ def face_geometry(ms: Microstructure, staircase: bool = True,
         the contact spots of ``Materials(contact_conductance=...)``.
     contact : {"area", "gap"}
         The contact model the geometry is for (``Materials.contact``, default the same as
-        there). With ``"gap"`` and a
-        particle table, matrix wedges thinner than a voxel between nearly touching spheres
-        are given to the spheres (:func:`fill_thin_films`); the geometry's own
-        ``material_ids`` then differ from the microstructure's in those voxels.
+        there). With ``"gap"`` and a particle table, matrix wedges thinner than a voxel
+        between nearly touching spheres are given to the spheres (:func:`fill_thin_films`);
+        the geometry's own ``material_ids`` then differ from the microstructure's there.
 
     Returns
     -------
@@ -523,7 +528,7 @@ def face_geometry(ms: Microstructure, staircase: bool = True,
         pairs = uniq[:, :2]
         face_pair = [np.where(k >= 0, inverse[np.maximum(k, 0)], -1) if inverse.size
                      else np.full_like(k, -1) for k in pair_keys]
-        mat_of_particle = np.concatenate([[0], [ms.names.index(m) for m in table.material]])
+        mat_of_particle = _particle_material_ids(ms)
         extra = dict(
             film=tuple(films),
             pair=tuple(face_pair), pair_particles=pairs, pair_gap_m=gap_of_row[first],
