@@ -97,6 +97,25 @@ def sphere_array(kind: str, n: int, f: float, R: float, box_um: float = 4.0
     return ms, _mat({("Al2O3", "silicone"): R, ("Al2O3", "Al2O3"): R})
 
 
+#: Nearest-neighbour distance of each cubic lattice, in cell edges.
+_NEAREST = {"sc": 1.0, "bcc": math.sqrt(3.0) / 2.0, "fcc": math.sqrt(2.0) / 2.0}
+
+
+def touching_array(kind: str, radius_m: float, film_m: float, per_radius: int,
+                   filler: str = "Al2O3", matrix: str = "silicone"
+                   ) -> tuple[Microstructure, float]:
+    """One cubic cell of a SC/BCC/FCC array of spheres whose nearest neighbours are a matrix
+    film apart; returns the microstructure (about ``per_radius`` voxels per radius) and the
+    volume fraction. The reference is :func:`itr_fv.analytic.sphere_array` at that fraction.
+    """
+    L = (2.0 * radius_m + film_m) / _NEAREST[kind]
+    n = int(round(L / (radius_m / per_radius)))
+    c = (_LATTICE[kind] - _LATTICE[kind][0] + 0.25) * L  # off the grid's symmetry planes
+    ms = Microstructure.from_spheres(np.mod(c, L), np.full(len(c), radius_m), filler,
+                                     box_m=L, shape=n, matrix=matrix)
+    return ms, len(c) * 4.0 / 3.0 * math.pi * radius_m**3 / L**3
+
+
 def _radii(rng: np.random.Generator, filler: str, volume_um3: float, d_max_um: float
            ) -> np.ndarray:
     """Lognormal diameters (Table 1) truncated at d_max until the volume is reached; radii um."""

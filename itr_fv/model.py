@@ -121,6 +121,12 @@ class FaceGeometry:
     touch_gap_m: float = DEFAULT_TOUCH_GAP_M
     contact_model: str = "area"
     filled_voxels: int = 0
+    segments: tuple | None = None
+    particle_mat: np.ndarray | None = None
+
+    @property
+    def _particle_mat(self) -> np.ndarray:
+        return self.particle_mat
 
     @property
     def n_interface_faces(self) -> int:
@@ -207,11 +213,27 @@ class FaceGeometry:
             with np.errstate(invalid="ignore"):
                 series = half_r[lo] + half_r[hi] + np.where(np.isinf(r_face), np.inf,
                                                             r_face * self.s[d])
-            g_face = 1.0 / series
+            g[d].reshape(-1)[idx] = 1.0 / series
+            if gap_model and self.segments is not None and self.segments[d][0].size:
+                self._segment_conductances(g[d], d, k, R)
             if spots is not None and cont.any():
-                g_face[cont] += spots[self.pair[d][cont]]
-            g[d].reshape(-1)[idx] = g_face
+                g[d].reshape(-1)[idx[cont]] += spots[self.pair[d][cont]]
         return g
+
+    def _segment_conductances(self, gd: np.ndarray, d: int, k: np.ndarray,
+                              R: np.ndarray) -> None:
+        """Overwrite the faces of the contact zones with their segment conductances:
+        ``1 / (l_a/k_a + l_b/k_b + l_m/k_m + s_a R_b,a + s_b R_b,b)`` (W/(m^2 K)), the
+        lengths along the segment joining the two voxel centres."""
+        flat, la, lb, sa, sb, pa, pb = self.segments[d]
+        ma = self._particle_mat[pa]
+        mb = self._particle_mat[pb]
+        lm = np.maximum(self.voxel_m - la - lb, 0.0)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            ra = np.where(sa > 0, sa * R[ma, 0], 0.0)
+            rb = np.where(sb > 0, sb * R[mb, 0], 0.0)
+            series = la / k[ma] + lb / k[mb] + lm / k[0] + ra + rb
+        gd.reshape(-1)[flat] = np.where(np.isinf(series), 0.0, 1.0 / series)
 
 
 def cell_centres(shape: tuple[int, int, int], voxel_m: float, axis: int) -> np.ndarray:
@@ -318,6 +340,40 @@ def _wedge_radius(dist: float, ra: float, rb: float, h: float) -> float:
     return lo
 
 
+def _near_contacts(ms: Microstructure, max_gap: float) -> list[tuple[int, int, np.ndarray]]:
+    """Pairs of spheres (0-based indices a, b and the vector D from a to the image of b)
+    whose closest gap is below ``max_gap`` (m); in small periodic cells every image counts."""
+    import scipy.spatial
+
+    table = ms.particles
+    box = np.array(ms.shape, dtype=np.float64) * ms.voxel_m
+    c = np.mod(table.centers_m, box)
+    r = table.radii_m
+    reach = 2.0 * float(r.max()) + max_gap
+    todo = []
+    if reach < 0.5 * float(box.min()):
+        # large box: a pair within reach touches through its minimum image only
+        if len(table) > 1:
+            tree = scipy.spatial.cKDTree(c, boxsize=box * (1 + 1e-12))
+            pairs = tree.query_pairs(reach, output_type="ndarray")
+            D = _min_image(c[pairs[:, 1]] - c[pairs[:, 0]], box)
+            near = np.sqrt((D * D).sum(axis=1)) < r[pairs[:, 0]] + r[pairs[:, 1]] + max_gap
+            todo = [(int(i), int(j), dv) for (i, j), dv in zip(pairs[near], D[near])]
+    else:
+        # small periodic cell: a pair (or a sphere and itself) may touch through any image
+        shifts = np.array([(x, y, z) for x in (-1, 0, 1) for y in (-1, 0, 1)
+                           for z in (-1, 0, 1)])
+        for i in range(len(r)):
+            for j in range(i, len(r)):
+                for sh in shifts:
+                    if i == j and tuple(sh) <= (0, 0, 0):
+                        continue  # itself, and each self-image contact once
+                    D = c[j] + sh * box - c[i]
+                    if np.sqrt(D @ D) < r[i] + r[j] + max_gap:
+                        todo.append((i, j, D))
+    return todo
+
+
 def fill_thin_films(ms: Microstructure) -> tuple[np.ndarray, np.ndarray, int]:
     """Particle and material ids with matrix wedges thinner than a voxel given to a particle.
 
@@ -337,8 +393,6 @@ def fill_thin_films(ms: Microstructure) -> tuple[np.ndarray, np.ndarray, int]:
     filled : int
         Number of voxels that changed.
     """
-    import scipy.spatial
-
     table = ms.particles
     pid = ms.particle_ids.copy()
     mid = ms.material_ids.copy()
@@ -349,28 +403,7 @@ def fill_thin_films(ms: Microstructure) -> tuple[np.ndarray, np.ndarray, int]:
     c = np.mod(table.centers_m, box)
     r = table.radii_m
     mat_of = _particle_material_ids(ms).astype(mid.dtype)
-    reach = 2.0 * float(r.max()) + h
-    todo = []
-    if reach < 0.5 * float(box.min()):
-        # large box: a pair within reach touches through its minimum image only
-        if len(table) > 1:
-            tree = scipy.spatial.cKDTree(c, boxsize=box * (1 + 1e-12))
-            pairs = tree.query_pairs(reach, output_type="ndarray")
-            D = _min_image(c[pairs[:, 1]] - c[pairs[:, 0]], box)
-            near = np.sqrt((D * D).sum(axis=1)) < r[pairs[:, 0]] + r[pairs[:, 1]] + h
-            todo = [(int(i), int(j), dv) for (i, j), dv in zip(pairs[near], D[near])]
-    else:
-        # small periodic cell: a pair (or a sphere and itself) may touch through any image
-        shifts = np.array([(x, y, z) for x in (-1, 0, 1) for y in (-1, 0, 1)
-                           for z in (-1, 0, 1)])
-        for i in range(len(r)):
-            for j in range(i, len(r)):
-                for sh in shifts:
-                    if i == j and tuple(sh) <= (0, 0, 0):
-                        continue  # itself, and each self-image contact once
-                    D = c[j] + sh * box - c[i]
-                    if np.sqrt(D @ D) < r[i] + r[j] + h:
-                        todo.append((i, j, D))
+    todo = _near_contacts(ms, h)
     filled = 0
     for a, b, D in todo:
         dist = float(np.sqrt(D @ D))
@@ -403,6 +436,93 @@ def fill_thin_films(ms: Microstructure) -> tuple[np.ndarray, np.ndarray, int]:
         mid[target] = mat_of[owner]
         filled += int(sel.sum())
     return pid, mid, filled
+
+
+#: Contact zones whose film is at most this many voxels get segment conductances.
+SEGMENT_ZONE_VOXELS = 3.0
+
+
+def _segment_in_sphere(x0: np.ndarray, d: int, h: float, centre: np.ndarray, radius: float,
+                       staircase: bool) -> tuple[np.ndarray, np.ndarray]:
+    """Length (m) of the segments x0 -> x0 + h e_d inside a sphere, and the sum of the
+    staircase factors of the surface crossings strictly inside the segments."""
+    w = x0 - centre
+    wd = w[:, d]
+    disc = radius * radius - ((w * w).sum(axis=1) - wd * wd)
+    root = np.sqrt(np.maximum(disc, 0.0))
+    t1 = (-wd - root) / h
+    t2 = (-wd + root) / h
+    inside = np.where(disc > 0, np.clip(np.minimum(t2, 1.0) - np.maximum(t1, 0.0), 0.0, None),
+                      0.0) * h
+    s_sum = np.zeros(len(x0))
+    for t in (t1, t2):
+        cross = (disc > 0) & (t > 0.0) & (t < 1.0)
+        if cross.any():
+            p = x0[cross] - centre
+            p[:, d] += t[cross] * h
+            s_sum[cross] += _staircase_factor(p) if staircase else 1.0
+    return inside, s_sum
+
+
+def _segment_faces(ms: Microstructure, staircase: bool) -> tuple[list, ...]:
+    """Faces in the contact zones, with the geometry along their centre-to-centre segments.
+
+    Around every pair of spheres whose matrix film is thinner than SEGMENT_ZONE_VOXELS
+    voxels somewhere, the faces whose centre lies in that thin part of the film (and within
+    a voxel of its two surfaces) get their conductance from the analytic spheres along the
+    segment joining the two voxel centres, not from the voxel labels: a film resolved by
+    voxels conducts as its voxelized thickness, which along a diagonal normal comes in
+    layers of h max|n_i| (``validation/results/thin_film.md``).
+
+    Returns
+    -------
+    per axis: flat face index, length in sphere a, length in sphere b (m), summed staircase
+    factors of the crossings of a and of b, particle ids (1-based) of a and b.
+    """
+    table = ms.particles
+    shape, h = ms.shape, ms.voxel_m
+    c = np.mod(table.centers_m, np.array(shape, dtype=np.float64) * h)
+    r = table.radii_m
+    zone = SEGMENT_ZONE_VOXELS * h
+    out = [[[] for _ in range(7)] for _ in range(3)]
+    seen = [set() for _ in range(3)]
+    for a, b, D in _near_contacts(ms, zone):
+        dist = float(np.sqrt(D @ D))
+        gap0 = dist - r[a] - r[b]
+        if gap0 >= zone or dist <= 0.0:
+            continue
+        u = D / dist
+        rho_max = _wedge_radius(dist, r[a], r[b], zone)
+        x_mid = c[a] + u * (r[a] + 0.5 * gap0)
+        half = rho_max + 2 * h
+        lo_i = np.floor((x_mid - half) / h - 0.5).astype(int)
+        hi_i = np.ceil((x_mid + half) / h - 0.5).astype(int)
+        ii = [np.arange(lo_i[k], hi_i[k] + 1) for k in range(3)]
+        grid = np.stack(np.meshgrid(*ii, indexing="ij"), axis=-1).reshape(-1, 3)
+        x = (grid + 0.5) * h
+        cb = c[a] + D
+        for d in range(3):
+            xf = x.copy()
+            xf[:, d] += 0.5 * h
+            w = xf - c[a]
+            t = w @ u
+            rho2 = np.maximum((w * w).sum(axis=1) - t * t, 0.0)
+            surf_a = np.sqrt(np.maximum(r[a] ** 2 - rho2, 0.0))
+            surf_b = dist - np.sqrt(np.maximum(r[b] ** 2 - rho2, 0.0))
+            sel = (rho2 <= rho_max ** 2) & (t > surf_a - h) & (t < surf_b + h)
+            if not sel.any():
+                continue
+            la, sa = _segment_in_sphere(x[sel], d, h, c[a], r[a], staircase)
+            lb, sb = _segment_in_sphere(x[sel], d, h, cb, r[b], staircase)
+            flat = np.ravel_multi_index(tuple(np.mod(grid[sel, k], shape[k]) for k in range(3)),
+                                        shape)
+            for f, la_, lb_, sa_, sb_ in zip(flat, la, lb, sa, sb):
+                if f in seen[d]:
+                    continue  # a face in two contact zones keeps the first
+                seen[d].add(f)
+                for k, v in enumerate((f, la_, lb_, sa_, sb_, a + 1, b + 1)):
+                    out[d][k].append(v)
+    return tuple(tuple(np.asarray(col) for col in axis) for axis in out)
 
 
 def face_geometry(ms: Microstructure, staircase: bool = True,
@@ -534,7 +654,9 @@ def face_geometry(ms: Microstructure, staircase: bool = True,
             pair=tuple(face_pair), pair_particles=pairs, pair_gap_m=gap_of_row[first],
             pair_faces=counts,
             pair_material_ids=mat_of_particle[pairs].astype(np.int32),
-            touch_gap_m=float(touch_gap_m), filled_voxels=filled)
+            touch_gap_m=float(touch_gap_m), filled_voxels=filled,
+            segments=_segment_faces(ms, staircase) if contact == "gap" else None,
+            particle_mat=mat_of_particle)
     return FaceGeometry(tuple(shape), float(h), tuple(ms.names), mid, tuple(index), tuple(lo),
                         tuple(hi), tuple(is_contact_all), tuple(s_all), mode,
                         contact_model=contact, **extra)

@@ -10,6 +10,7 @@ import itr_fft
 import itr_fv
 from itr_fv import Materials, Microstructure, analytic
 from itr_fv.checks import VoxelContactWarning
+from itr_fv.gallery import touching_array
 from itr_fv.model import face_geometry
 
 A = 1.5e-6
@@ -30,15 +31,21 @@ def gap_materials(kp=30.0, rb=2e-8, spots=None) -> Materials:
                      matrix="silicone", contact="gap", contact_conductance=spots)
 
 
+@pytest.mark.parametrize("lattice", ["sc", "bcc", "fcc"])
 @pytest.mark.parametrize("solve", [itr_fv.homogenize, itr_fft.homogenize])
-def test_nearly_touching_sc_array_matches_the_multipole_reference(solve):
-    """CI-size point of acceptance 1: h = a/8, 1.5 nm films, within 4 %."""
-    ms, f = sc_cell(1.5e-9, 8)
-    mat = gap_materials()
-    ref = analytic.sphere_array("sc", f, 30.0 / K_M, 2e-8 * K_M / A) * K_M
-    res = solve(ms, mat, tol=1e-9)
-    k = np.trace(res.k_eff) / 3
+def test_nearly_touching_arrays_match_the_multipole_reference(solve, lattice):
+    """CI-size point of acceptance 1: h = a/8, 1.5 nm films, within 4 % (measured: SC -2.6 %,
+    BCC -3.9 %, FCC -2.8 %; validation/results/gap_model.md)."""
+    ms, f = touching_array(lattice, A, 1.5e-9, 8)
+    ref = analytic.sphere_array(lattice, f, 30.0 / K_M, 2e-8 * K_M / A) * K_M
+    k = np.trace(solve(ms, gap_materials(), tol=1e-9).k_eff) / 3
     assert k == pytest.approx(ref, rel=0.04)
+
+
+@pytest.mark.parametrize("solve", [itr_fv.homogenize, itr_fft.homogenize])
+def test_the_per_area_model_cannot_see_a_thin_film(solve):
+    ms, f = sc_cell(1.5e-9, 8)
+    ref = analytic.sphere_array("sc", f, 30.0 / K_M, 2e-8 * K_M / A) * K_M
     # the per-area model with the same numbers has no film at all: it cannot see the 1.5 nm
     area = Materials({"silicone": K_M, "Al2O3": 30.0},
                      {("Al2O3", "silicone"): 2e-8, ("Al2O3", "Al2O3"): 0.0}, "silicone")

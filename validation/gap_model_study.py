@@ -4,8 +4,9 @@ SC, BCC and FCC arrays of spheres of radius a = 1.5 um whose nearest neighbours 
 separated by a matrix film of 1.5, 10 or 20 nm, particle-matrix resistance R_b = 2e-8 or
 5e-8 m^2 K/W, k_p = 30 or 200 W/(m K) in k_m = 0.18 W/(m K). Reference:
 ``itr_fv.analytic.sphere_array`` (the spheres with interface resistance R_b in the matrix:
-the film is the matrix between them). Solver: itr_fft at tol 1e-8, ``contact="gap"``,
-h = a/8, a/12, a/16. Writes ``validation/results/gap_model.md`` and a CSV beside it.
+the film is the matrix between them). Cells from ``itr_fv.gallery.touching_array``.
+Solver: itr_fft at tol 1e-8, ``contact="gap"``, h = a/8, a/12, a/16. Writes
+``validation/results/gap_model.md``.
 
 Usage::
 
@@ -15,7 +16,6 @@ Usage::
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 import time
 from pathlib import Path
@@ -27,23 +27,6 @@ sys.path.insert(0, str(ROOT))
 
 A = 1.5e-6
 K_M = 0.18
-BASIS = {"sc": [(0, 0, 0)], "bcc": [(0, 0, 0), (.5, .5, .5)],
-         "fcc": [(0, 0, 0), (.5, .5, 0), (.5, 0, .5), (0, .5, .5)]}
-NEAREST = {"sc": 1.0, "bcc": math.sqrt(3) / 2, "fcc": math.sqrt(2) / 2}
-
-
-def lattice(lat: str, film_m: float, per_radius: int):
-    """Microstructure of one cubic cell, the volume fraction and the cell edge (m)."""
-    from itr_fv import Microstructure
-
-    L = (2 * A + film_m) / NEAREST[lat]
-    n = int(round(L / (A / per_radius)))
-    c = (np.array(BASIS[lat]) + 0.25) * L
-    ms = Microstructure.from_spheres(c, np.full(len(c), A), "Al2O3", box_m=L, shape=n,
-                                     matrix="silicone")
-    return ms, len(c) * 4 / 3 * math.pi * A**3 / L**3, L
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--per", default="8,12,16", help="voxels per radius")
@@ -51,6 +34,7 @@ def main() -> None:
     args = ap.parse_args()
     import itr_fft
     from itr_fv import Materials, analytic
+    from itr_fv.gallery import touching_array
 
     rows = []
     for per in [int(p) for p in args.per.split(",")]:
@@ -58,7 +42,7 @@ def main() -> None:
             for film in (1.5e-9, 10e-9, 20e-9):
                 for kp in (30.0, 200.0):
                     for rb in (2e-8, 5e-8):
-                        ms, f, L = lattice(lat, film, per)
+                        ms, f = touching_array(lat, A, film, per)
                         mat = Materials({"silicone": K_M, "Al2O3": kp},
                                         {("Al2O3", "silicone"): rb}, matrix="silicone",
                                         contact="gap")
