@@ -49,10 +49,9 @@ class Materials:
         ``"gap"`` (in development, to become the default): the two particle-matrix
         resistances and the true matrix film between the analytic spheres,
         ``s (R_b,p + R_b,q + d(x_f) / k_m)``; no same-pair entry is needed. Needs the
-        particle geometry (``Microstructure.from_spheres`` or ``generate_rve``). Verified on
-        simple-cubic arrays of nearly touching spheres (within 2.3 % of the multipole
-        reference at h = a/8 to a/16); on BCC and FCC arrays it still over-predicts by 2-11 %
-        at h = a/12 (``validation/results/gap_model.md``).
+        particle geometry (``Microstructure.from_spheres`` or ``generate_rve``). Against the
+        multipole reference on nearly touching SC/BCC/FCC arrays: within 1.7 % at h = a/16,
+        within 3.0 % at h = a/12 (``validation/results/gap_model.md``).
     contact_conductance : mapping of (str, str) to float, optional
         Solid contact spot per touching particle pair, W/K, by unordered pair of filler
         phases (e.g. ``{("Al2O3", "Al2O3"): 2e-6}``): spread over that contact's faces in
