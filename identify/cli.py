@@ -164,6 +164,8 @@ def build_parser() -> argparse.ArgumentParser:
                       help="relative residual, in [1e-12, 1) (default 1e-8)")
     demo.add_argument("--out", default="itr-demo", help="output folder (default itr-demo)")
     demo.set_defaults(func=_demo)
+    from .campaign_cli import add_campaign_parser
+    add_campaign_parser(sub, _Parser, _number)
     return parser
 
 

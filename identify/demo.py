@@ -113,7 +113,10 @@ def run_demo(settings: DemoSettings, out: Path, echo=print) -> list[Path]:
     echo(f"RVE: {settings.n}^3 voxels of {settings.voxel_um:g} um ({settings.box_um:g} um box), "
          f"{ms.n_particles} Al2O3 particles, {ms.volume_fractions()['Al2O3']:.3f} by volume, "
          f"seed {settings.seed} ({time.perf_counter() - t0:.1f} s)")
-    mat = Materials(PAPER_K, PAPER_R, matrix="silicone")
+    # the gap contact model: a contact is the two particle-matrix resistances and the
+    # silicone film between the spheres, so only the particle-matrix value is needed
+    mat = Materials(PAPER_K, {("Al2O3", "silicone"): PAPER_R[("Al2O3", "silicone")]},
+                    matrix="silicone", contact="gap")
     if settings.solver == "fft":
         import itr_fft
         solve = itr_fft.homogenize

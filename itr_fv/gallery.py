@@ -68,7 +68,7 @@ class RVECase:
 def _mat(resistance: dict, fillers: tuple[str, ...] = ("Al2O3",)) -> Materials:
     k = {"silicone": K_SILICONE}
     k.update({f: {"Al2O3": K_AL2O3, "AlN": K_ALN}[f] for f in fillers})
-    return Materials(k, resistance, matrix="silicone")
+    return Materials(k, resistance, matrix="silicone", contact="area")
 
 
 # ------------------------------------------------------------------ geometries

@@ -9,6 +9,7 @@ import numpy as np
 
 from .checks import phase_name as _check_name
 from .checks import real_number
+from .parameters import parameter_name, parse_parameter
 
 __all__ = ["Materials", "CONTACT_MODELS"]
 
@@ -41,17 +42,20 @@ class Materials:
         carry no resistance.
     matrix : str
         Name of the matrix (continuous) phase; must be a key of ``conductivity``.
-    contact : {"area", "gap"}
+    contact : {"gap", "area"}
         Model of the faces between two *different* particles (see :mod:`itr_fv.model`).
-        ``"area"`` (default for now): the paper's per-area contact resistance ``R(A, B)`` of
-        the table, whose value belongs to the voxel size it was identified at (a
-        :class:`~itr_fv.checks.VoxelContactWarning` says so when contact faces exist).
-        ``"gap"`` (in development, to become the default): the two particle-matrix
+        ``"gap"`` (default): the paper's Eq. 6 applied locally, the two particle-matrix
         resistances and the true matrix film between the analytic spheres,
-        ``s (R_b,p + R_b,q + d(x_f) / k_m)``; no same-pair entry is needed. Needs the
-        particle geometry (``Microstructure.from_spheres`` or ``generate_rve``). Against the
-        multipole reference on nearly touching SC/BCC/FCC arrays: within 1.7 % at h = a/16,
-        within 3.0 % at h = a/12 (``validation/results/gap_model.md``).
+        ``s (R_b,p + R_b,q + d(x_f) / k_m)``; no same-pair entry is needed and k_eff
+        converges under voxel refinement (``validation/results/resolution.md``). Needs the
+        particle geometry (``Microstructure.from_spheres`` or ``generate_rve``) when particles
+        share voxel faces. Against the multipole reference on nearly touching SC/BCC/FCC
+        arrays: within 1.7 % at h = a/16, within 3.0 % at h = a/12
+        (``validation/results/gap_model.md``).
+        ``"area"``: the paper's per-area contact resistance ``R(A, B)`` of the table, whose
+        value belongs to the voxel size it was identified at (a
+        :class:`~itr_fv.checks.VoxelContactWarning` says so when contact faces exist); also
+        the model for plain label images with touching particles.
     contact_conductance : mapping of (str, str) to float, optional
         Solid contact spot per touching particle pair, W/K, by unordered pair of filler
         phases (e.g. ``{("Al2O3", "Al2O3"): 2e-6}``): spread over that contact's faces in
@@ -72,7 +76,7 @@ class Materials:
         conductivity: Mapping[str, float],
         resistance: Mapping[tuple[str, str], float] | None = None,
         matrix: str = "matrix",
-        contact: str = "area",
+        contact: str = "gap",
         contact_conductance: Mapping[tuple[str, str], float] | None = None,
     ) -> None:
         if not isinstance(conductivity, Mapping) or len(conductivity) == 0:
@@ -184,6 +188,66 @@ class Materials:
             r = {p: val for p, val in r.items() if frozenset(p) != frozenset(pair)}
             r[tuple(pair)] = v
         return Materials(k, r, self.matrix, contact=self.contact, contact_conductance=spots)
+
+    # ------------------------------------------------------- flat parameters
+    def to_parameters(self) -> dict[str, float]:
+        """The values under the package's flat names (:mod:`itr_fv.parameters`).
+
+        ``k_<phase>`` for every phase, ``R_<A>_<B>`` for every pair with the matrix, and for
+        pairs of fillers ``Rff_<A>_<B>`` (``contact="area"``; the gap model does not use
+        them) and ``Gc_<A>_<B>`` (contact spots, ``contact="gap"``).
+        """
+        out = {parameter_name("k", name): v for name, v in self._k.items()}
+        for (a, b), v in self.resistance.items():
+            if self.matrix in (a, b):
+                out[parameter_name("R", a, b)] = v
+            elif self.contact == "area":
+                out[parameter_name("Rff", a, b)] = v
+        for (a, b), v in self.contact_conductance.items():
+            out[parameter_name("Gc", a, b)] = v
+        return out
+
+    @classmethod
+    def from_parameters(cls, parameters: Mapping[str, float], matrix: str, *,
+                        contact: str = "gap") -> "Materials":
+        """A ``Materials`` from flat parameter names (see :meth:`to_parameters`).
+
+        Raises
+        ------
+        ValueError
+            Naming the parameter: a malformed name, ``R_`` without the matrix, ``Rff_``
+            under the gap model, ``Gc_`` under the per-area model, a phase without ``k_``.
+        """
+        if not isinstance(parameters, Mapping):
+            raise ValueError("parameters: expected a mapping {name: value}")
+        k, r, spots = {}, {}, {}
+        for name, value in parameters.items():
+            kind, phases = parse_parameter(name)
+            if kind == "k":
+                k[phases[0]] = value
+            elif kind == "R":
+                if matrix not in phases:
+                    raise ValueError(f"parameter {name!r}: R_ is a filler-matrix resistance and "
+                                     f"names the matrix {matrix!r}; contacts between particles "
+                                     "are Rff_ (contact='area') or Gc_ (contact='gap')")
+                r[phases] = value
+            elif kind == "Rff":
+                if contact != "area":
+                    raise ValueError(f"parameter {name!r}: a per-area contact resistance belongs "
+                                     f"to contact='area', not {contact!r}")
+                r[phases] = value
+            else:
+                spots[phases] = value
+        missing = {p for pair in (*r, *spots) for p in pair} - set(k)
+        if missing:
+            raise ValueError(f"parameters: no conductivity for phase(s) {sorted(missing)} "
+                             f"(add k_{sorted(missing)[0]})")
+        return cls(k, r, matrix, contact=contact, contact_conductance=spots or None)
+
+    def with_parameters(self, parameters: Mapping[str, float]) -> "Materials":
+        """New ``Materials`` with the named flat parameters replaced."""
+        merged = {**self.to_parameters(), **dict(parameters)}
+        return Materials.from_parameters(merged, self.matrix, contact=self.contact)
 
     # ----------------------------------------------------- tables for the solver
     def tables(self, names: Sequence[str]) -> tuple[np.ndarray, np.ndarray]:

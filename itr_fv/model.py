@@ -528,7 +528,7 @@ def _segment_faces(ms: Microstructure, staircase: bool) -> tuple[list, ...]:
 def face_geometry(ms: Microstructure, staircase: bool = True,
                   image_smoothing: float = 1.5,
                   touch_gap_m: float = DEFAULT_TOUCH_GAP_M,
-                  contact: str = "area") -> FaceGeometry:
+                  contact: str = "gap") -> FaceGeometry:
     """Find the interface faces of ``ms`` and their staircase factors.
 
     Parameters
@@ -551,8 +551,8 @@ def face_geometry(ms: Microstructure, staircase: bool = True,
         Pairs whose closest surface gap is at most this (m) count as touching: they carry
         the contact spots of ``Materials(contact_conductance=...)``.
     contact : {"area", "gap"}
-        The contact model the geometry is for (``Materials.contact``, default the same as
-        there). With ``"gap"`` and a particle table, matrix wedges thinner than a voxel
+        The contact model the geometry is for (``Materials.contact``; the default is the
+        same as there). With ``"gap"`` and a particle table, matrix wedges thinner than a voxel
         between nearly touching spheres are given to the spheres (:func:`fill_thin_films`);
         the geometry's own ``material_ids`` then differ from the microstructure's there.
 

@@ -81,7 +81,7 @@ class DiscreteProblem:
         A precomputed geometry of ``ms`` for this contact model.
     """
 
-    def __init__(self, ms: Microstructure, *, contact: str = "area", staircase: bool = True,
+    def __init__(self, ms: Microstructure, *, contact: str = "gap", staircase: bool = True,
                  touch_gap_m: float = DEFAULT_TOUCH_GAP_M,
                  geometry: FaceGeometry | None = None) -> None:
         if not isinstance(ms, Microstructure):

@@ -181,6 +181,9 @@ class RVEReport:
         ``2 n_contact_pairs / n_particles``.
     voxel_face_contacts : int
         Voxel faces between two different particles (periodic).
+    gap_counts : dict of str to int
+        Distribution of the surface gaps between particle pairs: the number of pairs with a
+        gap below each of ``GAP_BINS_UM`` (keys such as ``"<0.005 um"``), cumulative.
     iterations, neighbour_builds : int
         Packing sweeps and neighbour-list rebuilds.
     seconds : dict
@@ -206,6 +209,7 @@ class RVEReport:
     voxel_face_contacts: int
     iterations: int
     neighbour_builds: int
+    gap_counts: dict[str, int] = field(default_factory=dict)
     seconds: dict[str, float] = field(default_factory=dict)
     warnings: list[str] = field(default_factory=list)
 
@@ -224,6 +228,8 @@ class RVEReport:
                  f"  overlaps {self.n_overlaps}, smallest gap {self.smallest_gap_um:.3g} um, "
                  f"coordination {self.coordination_number:.2f} (gap < {self.contact_gap_um:g} "
                  f"um), voxel-face contacts {self.voxel_face_contacts}",
+                 "  pairs with a gap " + ", ".join(f"{k}: {v}"
+                                                   for k, v in self.gap_counts.items()),
                  f"  packing {self.iterations} sweeps, {self.neighbour_builds} list builds; "
                  + ", ".join(f"{k} {v:.2f} s" for k, v in self.seconds.items())]
         for f in self.fillers:
@@ -334,6 +340,10 @@ def _face_contacts(pid: np.ndarray) -> int:
     return n
 
 
+#: Upper edges of the gap distribution of ``RVEReport.gap_counts``, um.
+GAP_BINS_UM = (0.002, 0.005, 0.02, 0.1, 0.5)
+
+
 # --------------------------------------------------------------------------- main
 def generate_rve(specs: Sequence[FillerSpec] | FillerSpec, box_um: float, voxel_um: float,
                  seed: int, min_gap_um: float = 0.0, matrix: str = "silicone", *,
@@ -357,7 +367,12 @@ def generate_rve(specs: Sequence[FillerSpec] | FillerSpec, box_um: float, voxel_
         Seed of ``numpy.random.default_rng``; the same seed gives the same particle table
         bit for bit (on the same platform and library versions).
     min_gap_um : float
-        Smallest surface-to-surface distance between particles, um (>= 0).
+        Thinnest matrix film between two particles, um (>= 0): a physical parameter of the
+        composite, the silicone film that separates touching particles. Under the gap contact
+        model (``Materials(contact="gap")``) it is the film of every contact, whose
+        resistance ``2 R_b + d / k_m`` it enters. 0 (default) keeps the packer's numerical
+        gaps of about 1 nm, i.e. particles in contact through their two interface resistances
+        alone. The report's ``gap_counts`` gives the distribution of the gaps.
     matrix : str
         Name of the matrix phase.
     materials : iterable of str or Materials, optional
@@ -555,6 +570,8 @@ def generate_rve(specs: Sequence[FillerSpec] | FillerSpec, box_um: float, voxel_
             mu_fit_truncated=mu_t, sigma_fit_truncated=s_t,
             ks_statistic=float(ks.statistic), ks_pvalue=float(ks.pvalue)))
     n_contact = int(np.count_nonzero(g < cgap))
+    _, _, g_all = pairs_within_gap(centers, 0.5 * d_all, L, GAP_BINS_UM[-1])
+    gap_counts = {f"<{b:g} um": int(np.count_nonzero(g_all < b)) for b in GAP_BINS_UM}
     report = RVEReport(
         seed=int(seed), box_um=L, voxel_um=h, shape=(nvox,) * 3, min_gap_um=gap,
         fillers=fillers, phi_total=phi_total, phi_rcp_estimate=phi_rcp,
@@ -562,7 +579,7 @@ def generate_rve(specs: Sequence[FillerSpec] | FillerSpec, box_um: float, voxel_
         smallest_gap_um=float(g.min()) if g.size else math.inf, contact_gap_um=cgap,
         n_contact_pairs=n_contact, coordination_number=2.0 * n_contact / d_all.size,
         voxel_face_contacts=_face_contacts(ms.particle_ids), iterations=res.iterations,
-        neighbour_builds=res.neighbour_builds, warnings=warn)
+        neighbour_builds=res.neighbour_builds, gap_counts=gap_counts, warnings=warn)
     report.seconds = {"sample": t_sample, "pack": res.seconds, "check": t_check,
                       "voxelize": t_vox, "report": time.perf_counter() - t3,
                       "total": time.perf_counter() - t_start}

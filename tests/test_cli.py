@@ -116,7 +116,7 @@ def test_demo_end_to_end_small(tmp_path):
         assert (out / f["path"]).stat().st_mtime <= (out / "manifest.json").stat().st_mtime
     summary = json.loads((out / "demo.json").read_text())
     assert summary["solver"] == "itr_fft" and summary["settings"]["voxel_um"] == 0.25
-    assert summary["contact_model"] == "area"
+    assert summary["contact_model"] == "gap"
     grid = pv.read(out / "demo.vti")
     assert grid.n_cells == 24**3 and "temperature_fluctuation_e1" in grid.cell_data
     k = summary["k_eff_W_per_mK"]

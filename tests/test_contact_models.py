@@ -1,4 +1,4 @@
-"""Contact models of the faces between two different particles (issue 9, in progress)."""
+"""Contact models of the faces between two different particles (issue 9)."""
 
 import math
 import warnings
@@ -48,7 +48,8 @@ def test_the_per_area_model_cannot_see_a_thin_film(solve):
     ref = analytic.sphere_array("sc", f, 30.0 / K_M, 2e-8 * K_M / A) * K_M
     # the per-area model with the same numbers has no film at all: it cannot see the 1.5 nm
     area = Materials({"silicone": K_M, "Al2O3": 30.0},
-                     {("Al2O3", "silicone"): 2e-8, ("Al2O3", "Al2O3"): 0.0}, "silicone")
+                     {("Al2O3", "silicone"): 2e-8, ("Al2O3", "Al2O3"): 0.0}, "silicone",
+                     contact="area")
     with pytest.warns(VoxelContactWarning, match="voxel"):
         k_area = np.trace(solve(ms, area, tol=1e-9).k_eff) / 3
     assert k_area > 1.1 * ref
@@ -170,8 +171,31 @@ def test_one_discrete_problem_serves_many_parameter_sets():
         np.testing.assert_allclose(fv.k_eff, fresh.k_eff, rtol=1e-6, atol=1e-9)
     with pytest.raises(ValueError, match="mat: uses contact='area'"):
         itr_fft.homogenize(problem, Materials({"silicone": K_M, "Al2O3": 30.0},
-                                              {("Al2O3", "silicone"): 2e-8}, "silicone"))
+                                              {("Al2O3", "silicone"): 2e-8}, "silicone",
+                                              contact="area"))
     with pytest.raises(ValueError, match="geometry: a DiscreteProblem already holds"):
         itr_fft.homogenize(problem, gap_materials(), geometry=problem.geometry)
     with pytest.raises(ValueError, match="contact: expected one of"):
         DiscreteProblem(ms, contact="film")
+
+
+def test_the_gap_model_is_the_default():
+    """Materials, face_geometry and DiscreteProblem default to the gap model: a packing
+    solves with the particle-matrix resistance alone, and a label image whose particles
+    touch is refused with a message that names the per-area alternative."""
+    from itr_fv.problem import DiscreteProblem
+
+    mat = Materials({"silicone": K_M, "Al2O3": 30.0}, {("Al2O3", "silicone"): 2e-8},
+                    "silicone")
+    assert mat.contact == "gap"
+    ms, f = sc_cell(1.5e-9, 8)
+    assert DiscreteProblem(ms).contact == "gap" and face_geometry(ms).contact_model == "gap"
+    ref = analytic.sphere_array("sc", f, 30.0 / K_M, 2e-8 * K_M / A) * K_M
+    k = np.trace(itr_fft.homogenize(ms, mat, tol=1e-9).k_eff) / 3
+    assert k == pytest.approx(ref, rel=0.04)
+    pid = np.zeros((8, 8, 8), int)
+    pid[:4], pid[4:] = 1, 2
+    labels = Microstructure.from_labels((pid > 0).astype(int), pid, voxel_m=1e-7,
+                                        names=("silicone", "Al2O3"))
+    with pytest.raises(ValueError, match="contact='area'"):
+        itr_fv.homogenize(labels, mat)

@@ -76,7 +76,7 @@ def test_warm_start_from_neighbouring_resistance():
     at a campaign tolerance of 1e-5 saves > 2x (measured 153 -> 56 iterations at 24^3).
     """
     ms, mat = build("al2o3_60", "ci")
-    geom = itr_fv.model.face_geometry(ms)
+    geom = itr_fv.model.face_geometry(ms, contact=mat.contact)
     pairs = [("Al2O3", "silicone"), ("Al2O3", "Al2O3")]
     first = itr_fft.homogenize(ms, mat.with_values(resistance={p: 1e-7 for p in pairs}),
                                tol=1e-8, geometry=geom)

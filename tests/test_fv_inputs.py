@@ -119,11 +119,11 @@ def test_contact_pair_is_required_only_when_particles_touch():
     pid[3:5, 1:3, 1:3] = 2   # touches particle 1 across x = 3
     ms = Microstructure.from_labels(mid, pid, 1e-6, ("matrix", "filler"))
     with pytest.raises(ValueError, match=r"\('filler', 'filler'\)"):
-        homogenize(ms, Materials(K, R, "matrix"))
+        homogenize(ms, Materials(K, R, "matrix", contact="area"))
     pid[3:5, 1:3, 1:3] = 0
     mid[3:5, 1:3, 1:3] = 0
     ms = Microstructure.from_labels(mid, pid, 1e-6, ("matrix", "filler"))
-    assert homogenize(ms, Materials(K, R, "matrix"), tol=1e-10).converged
+    assert homogenize(ms, Materials(K, R, "matrix", contact="area"), tol=1e-10).converged
 
 
 def test_non_convergence_raises_and_can_be_accepted():

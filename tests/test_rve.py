@@ -110,6 +110,21 @@ def test_min_gap_respected():
     n_bad, g = _overlaps_kdtree(c, r, L, min_gap=gap)
     assert n_bad == 0 and g.min() >= gap
     assert rep.smallest_gap_um >= gap
+    # the reported gap distribution is the one of the table (independent cKDTree count)
+    assert rep.gap_counts["<0.02 um"] == 0
+    assert rep.gap_counts["<0.1 um"] == int(np.count_nonzero(g < 0.1))
+    assert rep.gap_counts["<0.5 um"] == int(np.count_nonzero(g < 0.5))
+
+
+def test_gap_distribution_without_a_film_shows_the_packers_nanometre_gaps():
+    ms, rep = generate_rve(FillerSpec("Al2O3", volume_fraction=0.5, **SMALL), 8.0, 0.125,
+                           seed=2, return_report=True)
+    c, r, L = _table_um(ms)
+    _, g = _overlaps_kdtree(c, r, L)
+    counts = list(rep.gap_counts.values())
+    assert counts == sorted(counts)  # cumulative
+    assert rep.gap_counts["<0.002 um"] == int(np.count_nonzero(g < 0.002)) > 0
+    assert "pairs with a gap <0.002 um" in rep.summary()
 
 
 def test_alN_box_cut_warns_and_reports_truncation():

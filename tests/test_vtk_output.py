@@ -38,7 +38,7 @@ def test_vti_round_trip_holds_all_arrays(result, tmp_path):
     assert 0.5 * result.k_eff[0, 0] < mag.mean() < 2.0 * result.k_eff[0, 0]
     np.testing.assert_allclose(np.asarray(grid.field_data["k_eff"]).reshape(3, 3)[:, 0],
                                result.k_eff[:, 0])
-    assert str(np.asarray(grid.field_data["contact_model"])[0]) == "area"
+    assert str(np.asarray(grid.field_data["contact_model"])[0]) == "gap"
     assert str(np.asarray(grid.field_data["solver"])[0]) == "itr_fv"
 
 

@@ -36,7 +36,8 @@ def one_case(n: int, R: float, amg: str) -> dict:
                       box_um=0.3125 * n, voxel_um=0.3125, seed=7, matrix="silicone")
     t_rve = time.perf_counter() - t0
     mat = Materials({"silicone": 0.18, "Al2O3": 30.0},
-                    {("Al2O3", "silicone"): R, ("Al2O3", "Al2O3"): R}, matrix="silicone")
+                    {("Al2O3", "silicone"): R, ("Al2O3", "Al2O3"): R}, matrix="silicone",
+                    contact="area")
     res = homogenize(ms, mat, tol=1e-8, amg=amg, store_fields=False)
     return {"n": n, "R": R, "amg": amg, "rve_s": t_rve, "setup_s": res.setup_time,
             "solve_s": res.solve_times, "iterations": res.iterations,

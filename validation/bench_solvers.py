@@ -109,7 +109,7 @@ def studies(n_grid: tuple[int, int] = (64, 128)) -> dict:
         refs.append((ref, r.info["g_ref"], r.iterations[0]))
     out["reference"] = refs
     # warm start: one step of Table 4 for both resistances
-    geom = itr_fv.model.face_geometry(ms)
+    geom = itr_fv.model.face_geometry(ms, contact=mat.contact)
     pairs = [("Al2O3", "silicone"), ("Al2O3", "Al2O3")]
     warm = []
     for r1, r2 in ((1e-7, 5e-7), (5e-7, 1e-6), (1e-6, 5e-6)):

@@ -71,7 +71,7 @@ def unit_cell(lattice: str, f: float, k_ratio: float, alpha: float, n: int, rep:
     R = alpha * a / K_M
     mat = Materials(conductivity={"matrix": K_M, "filler": K_M * k_ratio},
                     resistance={("filler", "matrix"): R, ("filler", "filler"): R},
-                    matrix="matrix")
+                    matrix="matrix", contact="area")
     shifts = np.array([(i, j, k) for i in range(rep) for j in range(rep) for k in range(rep)])
     centres = (sites[None, :, :] + shifts[:, None, :]).reshape(-1, 3) * BOX_M
     ms = Microstructure.from_spheres(centres, np.full(len(centres), a),

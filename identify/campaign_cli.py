@@ -1,0 +1,96 @@
+"""``itr campaign run|status|export``: the command line of :mod:`surrogate.runner`.
+
+Every check of the campaign file happens before any work starts; errors are one line
+(:mod:`identify.cli` prints them), status 2 for a bad file, flag or folder, 1 for a failure
+while running.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+__all__ = ["add_campaign_parser"]
+
+
+def _run(args: argparse.Namespace) -> int:
+    from surrogate.campaign import Campaign, CampaignError
+    from surrogate.runner import run_campaign
+
+    from .cli import CLIError
+
+    try:
+        camp = Campaign.from_toml(args.file)
+    except CampaignError as exc:
+        raise CLIError(str(exc), 2) from None
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise CLIError(f"--out: {args.out!r} is a file, not a folder", 2)
+    try:
+        summary = run_campaign(camp, out, workers=args.workers, scheduler=args.scheduler,
+                               progress=not args.no_progress)
+    except CampaignError as exc:
+        raise CLIError(str(exc), 2) from None
+    return 1 if summary.tasks_failed else 0
+
+
+def _store(folder: str):
+    from surrogate.campaign import CampaignError
+    from surrogate.store import CampaignStore
+
+    from .cli import CLIError
+
+    store = CampaignStore(folder)
+    if not store.campaign_file.exists():
+        raise CLIError(f"DIR: {folder!r} holds no campaign (no campaign.json)", 2)
+    try:
+        store.campaign()
+    except CampaignError as exc:
+        raise CLIError(f"DIR: {folder!r}: {exc}", 2) from None
+    return store
+
+
+def _status(args: argparse.Namespace) -> int:
+    print(_store(args.dir).status().summary())
+    return 0
+
+
+def _export(args: argparse.Namespace) -> int:
+    from itr_fv.io import output_file
+    from surrogate.campaign import CampaignError
+
+    from .cli import CLIError
+
+    store = _store(args.dir)
+    try:
+        path = output_file(args.csv, ".csv", "--csv")
+        store.export_csv(path)
+    except (ValueError, CampaignError) as exc:
+        raise CLIError(str(exc), 2) from None
+    rows = store.results().num_rows
+    print(f"wrote {path} ({rows} rows)")
+    return 0
+
+
+def add_campaign_parser(sub, parser_class, number) -> None:
+    """Register ``campaign run|status|export`` on the ``itr`` subparsers ``sub``."""
+    camp = sub.add_parser("campaign", help="high-throughput campaigns (Dask, Parquet)",
+                          description="Run a campaign file on Dask and store the results as "
+                          "Parquet; show its status; export it as CSV.")
+    actions = camp.add_subparsers(dest="action", required=True, parser_class=parser_class)
+    run = actions.add_parser("run", help="run (or resume) a campaign file")
+    run.add_argument("file", help="campaign file (TOML)")
+    run.add_argument("--out", required=True, help="campaign folder (new, or this campaign's)")
+    run.add_argument("--workers", type=number(int, 0, 64, hi_open=False), default=None,
+                     help="workers of the local Dask cluster (default: cores, at most 4)")
+    run.add_argument("--scheduler", default=None,
+                     help="address of a running Dask scheduler, e.g. tcp://host:8786")
+    run.add_argument("--no-progress", action="store_true", help="no progress bar")
+    run.set_defaults(func=_run)
+    status = actions.add_parser("status", help="done / total and failures of a campaign")
+    status.add_argument("dir", help="campaign folder")
+    status.set_defaults(func=_status)
+    export = actions.add_parser("export", help="all finished rows as CSV")
+    export.add_argument("dir", help="campaign folder")
+    export.add_argument("--csv", required=True, help="CSV file to write")
+    export.set_defaults(func=_export)

@@ -1,0 +1,64 @@
+"""The reference paper's tables, shipped with the package (``surrogate/data/*.csv``).
+
+The tables are transcribed from the paper (Tables 1-6); ``data/README.md`` lists the
+paper's own inconsistencies. Readers return plain Python structures; units are in the
+column names (W/(m K), m^2 K/W, volume per cent, micrometres).
+"""
+
+from __future__ import annotations
+
+import csv
+from importlib import resources
+
+__all__ = ["read_table", "formulations", "psd_lognormal", "paper_resistances",
+           "paper_validation", "measured_conductivities"]
+
+TABLES = ("formulations", "measured_tc", "paper_itr", "paper_validation", "parameter_grid",
+          "psd_lognormal")
+
+
+def read_table(name: str) -> list[dict[str, str]]:
+    """Rows of the shipped table ``name`` (one of :data:`TABLES`) as dictionaries of strings."""
+    if name not in TABLES:
+        raise ValueError(f"name: expected one of {TABLES}, got {name!r}")
+    text = resources.files("surrogate").joinpath("data", f"{name}.csv").read_text()
+    return list(csv.DictReader(text.splitlines()))
+
+
+def formulations() -> dict[str, dict[str, float]]:
+    """Table 2: formulation -> {filler: volume fraction (0-1)}, fillers with a zero share
+    left out."""
+    out = {}
+    for row in read_table("formulations"):
+        fr = {"Al2O3": float(row["Al2O3_vol_pct"]) / 100, "AlN": float(row["AlN_vol_pct"]) / 100}
+        out[row["formulation"]] = {k: v for k, v in fr.items() if v > 0}
+    return out
+
+
+def psd_lognormal() -> dict[str, tuple[float, float]]:
+    """Table 1: filler -> (mu, sigma) of ln(D / 1 um)."""
+    return {r["material"]: (float(r["mu_ln_um"]), float(r["sigma_ln"]))
+            for r in read_table("psd_lognormal")}
+
+
+def paper_resistances() -> dict[tuple[str, str], float]:
+    """Table 5: (phase, phase) -> the paper's identified resistance, m^2 K/W."""
+    out = {}
+    for r in read_table("paper_itr"):
+        a, b = r["interface"].split("-")
+        out[(a, b)] = float(r["R_m2K_per_W"])
+    return out
+
+
+def paper_validation() -> dict[str, tuple[float, float]]:
+    """Table 6: formulation -> (measured, predicted) conductivity, W/(m K)."""
+    return {r["formulation"]: (float(r["measured_W_per_mK"]), float(r["predicted_W_per_mK"]))
+            for r in read_table("paper_validation")}
+
+
+def measured_conductivities() -> dict[str, list[float]]:
+    """Table 3: formulation -> the replicate conductivities, W/(m K)."""
+    out: dict[str, list[float]] = {}
+    for r in read_table("measured_tc"):
+        out.setdefault(r["formulation"], []).append(float(r["k_W_per_mK"]))
+    return out

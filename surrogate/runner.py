@@ -1,0 +1,237 @@
+"""Run a campaign on dask.distributed: a LocalCluster by default, or an existing scheduler.
+
+A task (:class:`~surrogate.campaign.Task`) is one RVE and a block of parameter sets. On a
+worker, :func:`run_task` packs and voxelizes the RVE (seeded: the same table every time),
+stores its particle table, builds its :class:`~itr_fv.problem.DiscreteProblem` once, and
+solves the block's parameter sets in order, each warm-started from the nearest set already
+solved in the task. The rows go to one Parquet part file, written atomically when the task
+is complete (:class:`~surrogate.store.CampaignStore`). The driver (:func:`run_campaign`)
+submits the tasks whose part file is missing, shows a progress bar, and records failures
+without stopping the others.
+
+Results do not depend on the number of workers or threads: the solvers' reductions are
+ordered (``itr_fft._kernels``), every RVE comes from its seed, and a task always solves its
+block from the same cold start.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+import warnings
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from itr_fv.parameters import parse_parameter
+
+from .campaign import Campaign, CampaignError, Task, nearest_solved
+from .store import CampaignStore, rve_id
+
+__all__ = ["run_campaign", "run_task", "RunSummary", "worker_memory"]
+
+
+@dataclass(frozen=True)
+class RunSummary:
+    """What one ``run_campaign`` call did."""
+
+    tasks_run: int
+    tasks_skipped: int
+    tasks_failed: int
+    solves: int
+    wall_s: float
+    workers: int
+
+
+def _solve_function(solver: str, shape: tuple[int, int, int]) -> Callable:
+    if solver == "auto":
+        from .solver_choice import choose_solver
+        solver = "fv" if choose_solver(shape) == "itr_fv" else "fft"
+    if solver == "fv":
+        import itr_fv
+        return itr_fv.homogenize
+    import itr_fft
+    return itr_fft.homogenize
+
+
+def _build_rve(camp: Campaign, task: Task):
+    from itr_fv.rve import generate_rve
+
+    form = camp.formulation(task.formulation)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)  # the box cut: reported by the report
+        return generate_rve(form.specs(), box_um=camp.box_um, voxel_um=camp.voxel_um,
+                            seed=task.seed, min_gap_um=camp.min_gap_um, matrix=camp.matrix,
+                            max_diameter_box_ratio=camp.max_diameter_box_ratio)
+
+
+def run_task(campaign: dict, task: dict, folder: str) -> dict:
+    """Solve one task and write its part file; returns ``{"task_id", "solves", "wall_s"}``.
+
+    Runs on a dask worker (plain arguments: the campaign's dict form, the task's fields,
+    the folder).
+    """
+    from itr_fv import __version__
+    from itr_fv.problem import DiscreteProblem
+
+    t0 = time.perf_counter()
+    camp = Campaign.from_dict(campaign)
+    task = Task(**{**task, "set_indices": tuple(task["set_indices"])})
+    store = CampaignStore(folder)
+    ms = _build_rve(camp, task)
+    table = ms.particles
+    rid = rve_id(table.centers_m, table.radii_m, list(table.material), ms.shape, ms.voxel_m)
+    store.write_rve(rid, table.centers_m, table.radii_m, list(table.material),
+                    {"formulation": task.formulation, "replica": task.replica,
+                     "seed": task.seed, "box_um": camp.box_um, "voxel_um": camp.voxel_um,
+                     "shape": list(ms.shape), "matrix": camp.matrix})
+    problem = DiscreteProblem(ms, contact=camp.contact)
+    solve = _solve_function(camp.solver, ms.shape)
+    sets = camp.parameter_sets(camp.formulation(task.formulation))
+    solved, thetas, rows = [], [], []
+    for i in task.set_indices:
+        pset = sets[i]
+        mat = camp.materials(pset)
+        near = nearest_solved(pset, solved)
+        kwargs = {"workers": camp.threads_per_worker} if solve.__module__.startswith(
+            "itr_fft") else {}
+        t = time.perf_counter()
+        res = solve(problem, mat, tol=camp.tol, x0=None if near is None else thetas[near],
+                    **kwargs)
+        wall = time.perf_counter() - t
+        solved.append(pset)
+        thetas.append(np.stack(res.theta))
+        rows.append(_row(camp, task, i, rid, mat, res, wall, near is not None, __version__))
+    store.write_part(task.task_id, rows)
+    return {"task_id": task.task_id, "solves": len(rows), "wall_s": time.perf_counter() - t0}
+
+
+def _row(camp: Campaign, task: Task, index: int, rid: str, mat, res, wall: float,
+         warm: bool, version: str) -> dict:
+    k = res.k_eff
+    row = {"formulation": task.formulation, "replica": task.replica, "set_index": index,
+           "seed": task.seed, "task_id": task.task_id, "rve_id": rid, "box_um": camp.box_um,
+           "voxel_um": camp.voxel_um, "n": camp.shape[0], "contact": camp.contact,
+           "solver": res.solver, "tol": camp.tol, "package_version": version}
+    phases = {camp.matrix, *camp.formulation(task.formulation).fractions}
+    row.update({name: float(v) for name, v in sorted(mat.to_parameters().items())
+                if set(parse_parameter(name)[1]) <= phases})
+    for a, ax in enumerate("xyz"):
+        for b, bx in enumerate("xyz"):
+            row[f"k_{ax}{bx}"] = float(k[a, b])
+    row.update({"k_iso": float(np.trace(k) / 3.0), "iterations": int(max(res.iterations)),
+                "iterations_total": int(sum(res.iterations)),
+                "residual": float(max(res.residuals)), "warm_start": warm, "wall_s": wall})
+    return row
+
+
+def worker_memory(camp: Campaign) -> int:
+    """Bytes a worker needs for one task: the solver's peak estimate with the fields kept,
+    plus the warm-start fields of a block, plus 0.5 GB for the interpreter and libraries."""
+    from itr_fv.resources import estimate_peak_memory
+
+    solver = "itr_fv" if camp.solver == "fv" else "itr_fft"
+    peak = estimate_peak_memory(camp.shape, solver, store_fields=True)
+    fields = 3 * 8 * int(np.prod(camp.shape)) * camp.block_size
+    return int(peak + fields + 5e8)
+
+
+def _client(workers: int | None, scheduler: str | None, camp: Campaign, echo: Callable):
+    """A dask client on the scheduler, or on a new LocalCluster sized by memory."""
+    from dask.distributed import Client, LocalCluster
+
+    if scheduler:
+        try:
+            return Client(scheduler, timeout="5s"), None
+        except (OSError, TimeoutError) as exc:
+            raise CampaignError(f"--scheduler: cannot reach {scheduler!r} ({exc})") from None
+    from itr_fv.resources import available_memory
+
+    need = worker_memory(camp)
+    avail = available_memory() or need
+    n = workers or max(1, min(os.cpu_count() or 1, 4))
+    fit = max(1, int(avail // need))
+    if fit < n:
+        echo(f"memory: {n} workers of {need / 1e9:.2f} GB do not fit in {avail / 1e9:.1f} GB; "
+             f"using {fit}")
+        n = fit
+    cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                           memory_limit=need, dashboard_address=None)
+    return Client(cluster), cluster
+
+
+def run_campaign(campaign: Campaign, folder: str | Path, *, workers: int | None = None,
+                 scheduler: str | None = None, progress: bool = True,
+                 echo: Callable[[str], None] = print) -> RunSummary:
+    """Run every task of ``campaign`` whose results are not yet in ``folder``.
+
+    Parameters
+    ----------
+    campaign : Campaign
+    folder : path
+        Campaign folder (created; must be new or hold this same campaign).
+    workers : int, optional
+        Workers of the LocalCluster (default: the cores, at most 4; fewer if memory is
+        short). Ignored with ``scheduler``.
+    scheduler : str, optional
+        Address of a running dask scheduler (``tcp://host:port``) to use instead.
+    progress : bool
+        Show a progress bar with ETA on standard error.
+    echo : callable
+        Where the one-line messages go.
+
+    Returns
+    -------
+    RunSummary
+    """
+    from dask.distributed import as_completed
+    from tqdm import tqdm
+
+    t0 = time.perf_counter()
+    store = CampaignStore(folder)
+    store.check_for(campaign)
+    tasks = campaign.tasks()
+    done = store.done_tasks()
+    todo = [t for t in tasks if t.task_id not in done]
+    if not todo:
+        echo(f"campaign {campaign.name}: all {len(tasks)} tasks are done; nothing to solve")
+        return RunSummary(0, len(tasks), 0, 0, time.perf_counter() - t0, 0)
+    client, cluster = _client(workers, scheduler, campaign, echo)
+    store.open_for(campaign)
+    n_workers = len(client.scheduler_info().get("workers", {}))
+    echo(f"campaign {campaign.name}: {len(todo)} of {len(tasks)} tasks to run "
+         f"({sum(len(t.set_indices) for t in todo)} solves on {campaign.shape[0]}^3 voxels, "
+         f"{n_workers} workers)")
+    spec = campaign.to_dict()
+    failed = solves = 0
+    try:
+        futures = [client.submit(run_task, spec, _task_dict(t), str(store.folder),
+                                 key=f"itr-{campaign.fingerprint()[:8]}-{t.task_id}", pure=False)
+                   for t in todo]
+        bar = tqdm(total=len(todo), unit="task", disable=not progress, desc=campaign.name)
+        for fut in as_completed(futures):
+            try:
+                solves += fut.result()["solves"]
+            except Exception as exc:  # noqa: BLE001 - a task's failure is recorded, not fatal
+                failed += 1
+                task_id = str(fut.key).split("-", 2)[-1]
+                store.record_failure(task_id, f"{type(exc).__name__}: {exc}")
+            bar.update(1)
+            bar.set_postfix(solves=solves, failed=failed)
+        bar.close()
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+    summary = RunSummary(len(todo) - failed, len(tasks) - len(todo), failed, solves,
+                         time.perf_counter() - t0, n_workers)
+    echo(f"campaign {campaign.name}: {summary.tasks_run} tasks ({solves} solves) in "
+         f"{summary.wall_s:.1f} s on {n_workers} workers; {failed} failed")
+    return summary
+
+
+def _task_dict(task: Task) -> dict:
+    return {"task_id": task.task_id, "formulation": task.formulation, "replica": task.replica,
+            "seed": task.seed, "block": task.block, "set_indices": list(task.set_indices)}

@@ -1,0 +1,196 @@
+"""The results of a campaign on disk: a Parquet dataset that never loses a finished solve.
+
+Layout of a campaign folder::
+
+    campaign.json            the campaign (its checked form) and its fingerprint
+    parts/<task>.parquet     one file per finished task: a row per solve
+    rves/<rve_id>.parquet    the particle table of every RVE (re-solve any row from it)
+    failures/<task>.json     the error of a task that failed (removed when it succeeds)
+
+Every file is written to a temporary name in its folder and renamed when complete
+(:func:`itr_fv.io.atomic_path`), so a run killed at any moment (SIGKILL included) leaves
+only whole files: at most the tasks in flight are lost. A task whose part file exists is
+done; a re-run skips it. A folder holds one campaign: running another into it is refused.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.csv
+import pyarrow.parquet as pq
+
+from itr_fv.io import atomic_path, write_text
+
+from .campaign import Campaign, CampaignError
+
+__all__ = ["CampaignStore", "CampaignStatus", "rve_id", "RESULT_KEY"]
+
+#: Columns that identify a row (one solve) of a campaign.
+RESULT_KEY = ("formulation", "replica", "set_index")
+
+
+def rve_id(centers_m: np.ndarray, radii_m: np.ndarray, materials: list[str],
+           shape: tuple[int, int, int], voxel_m: float) -> str:
+    """Hash of a particle table and its voxel grid (16 hex digits): the RVE's identity."""
+    import hashlib
+
+    h = hashlib.sha256()
+    h.update(np.ascontiguousarray(centers_m, dtype="<f8").tobytes())
+    h.update(np.ascontiguousarray(radii_m, dtype="<f8").tobytes())
+    h.update("\0".join(materials).encode())
+    h.update(np.asarray(shape, dtype="<i8").tobytes())
+    h.update(np.float64(voxel_m).astype("<f8").tobytes())
+    return h.hexdigest()[:16]
+
+
+@dataclass(frozen=True)
+class CampaignStatus:
+    """Progress of a campaign folder."""
+
+    name: str
+    tasks_done: int
+    tasks_total: int
+    solves_done: int
+    solves_total: int
+    failures: dict[str, str]
+
+    @property
+    def complete(self) -> bool:
+        return self.tasks_done == self.tasks_total
+
+    def summary(self) -> str:
+        lines = [f"campaign {self.name}: {self.tasks_done}/{self.tasks_total} tasks done, "
+                 f"{self.solves_done}/{self.solves_total} solves"]
+        lines += [f"  failed {task}: {message}" for task, message in self.failures.items()]
+        return "\n".join(lines)
+
+
+class CampaignStore:
+    """The folder of one campaign.
+
+    Parameters
+    ----------
+    folder : path
+        The campaign folder.
+    """
+
+    def __init__(self, folder: str | Path) -> None:
+        self.folder = Path(folder)
+
+    # ------------------------------------------------------------------ campaign
+    @property
+    def campaign_file(self) -> Path:
+        return self.folder / "campaign.json"
+
+    def check_for(self, campaign: Campaign) -> bool:
+        """Whether the folder already holds ``campaign`` (False: new or empty); writes nothing.
+
+        Raises
+        ------
+        CampaignError
+            If the folder holds another campaign (a different fingerprint) or files that
+            are not a campaign's.
+        """
+        if self.campaign_file.exists():
+            held = json.loads(self.campaign_file.read_text())
+            if held.get("fingerprint") != campaign.fingerprint():
+                raise CampaignError(f"--out: {str(self.folder)!r} holds another campaign "
+                                    f"({held.get('campaign', {}).get('name')!r}); use a new "
+                                    "folder")
+            return True
+        if self.folder.exists() and any(self.folder.iterdir()):
+            raise CampaignError(f"--out: {str(self.folder)!r} is not empty and holds no "
+                                "campaign; use a new folder")
+        return False
+
+    def open_for(self, campaign: Campaign) -> None:
+        """Make the folder hold ``campaign``: new, or the same campaign again (see
+        :meth:`check_for` for what is refused)."""
+        if self.check_for(campaign):
+            return
+        from itr_fv import __version__
+
+        self.folder.mkdir(parents=True, exist_ok=True)
+        write_text(self.campaign_file, json.dumps(
+            {"fingerprint": campaign.fingerprint(), "package_version": __version__,
+             "campaign": campaign.to_dict()}, indent=2) + "\n")
+
+    def campaign(self) -> Campaign:
+        """The campaign this folder holds."""
+        if not self.campaign_file.exists():
+            raise CampaignError(f"{str(self.folder)!r} holds no campaign (no campaign.json)")
+        return Campaign.from_dict(json.loads(self.campaign_file.read_text())["campaign"])
+
+    # --------------------------------------------------------------------- parts
+    def part_path(self, task_id: str) -> Path:
+        return self.folder / "parts" / f"{task_id}.parquet"
+
+    def done_tasks(self) -> set[str]:
+        parts = self.folder / "parts"
+        return {p.stem for p in parts.glob("*.parquet")} if parts.is_dir() else set()
+
+    def write_part(self, task_id: str, rows: list[dict]) -> Path:
+        """Write one task's rows (atomically) and clear its failure record."""
+        table = pa.Table.from_pylist(rows)
+        with atomic_path(self.part_path(task_id)) as tmp:
+            pq.write_table(table, tmp)
+        (self.folder / "failures" / f"{task_id}.json").unlink(missing_ok=True)
+        return self.part_path(task_id)
+
+    def write_rve(self, rid: str, centers_m: np.ndarray, radii_m: np.ndarray,
+                  materials: list[str], meta: dict) -> Path:
+        """Store an RVE's particle table once (metadata: box, voxel, seed, formulation)."""
+        path = self.folder / "rves" / f"{rid}.parquet"
+        if path.exists():
+            return path
+        table = pa.table({"x_m": centers_m[:, 0], "y_m": centers_m[:, 1],
+                          "z_m": centers_m[:, 2], "radius_m": radii_m,
+                          "material": materials})
+        table = table.replace_schema_metadata({"itr": json.dumps(meta)})
+        with atomic_path(path) as tmp:
+            pq.write_table(table, tmp)
+        return path
+
+    def read_rve(self, rid: str) -> tuple[pa.Table, dict]:
+        """Particle table and metadata of a stored RVE."""
+        table = pq.read_table(self.folder / "rves" / f"{rid}.parquet")
+        return table, json.loads(table.schema.metadata[b"itr"])
+
+    def record_failure(self, task_id: str, message: str) -> None:
+        write_text(self.folder / "failures" / f"{task_id}.json",
+                   json.dumps({"task": task_id, "error": message}) + "\n")
+
+    def failures(self) -> dict[str, str]:
+        folder = self.folder / "failures"
+        if not folder.is_dir():
+            return {}
+        return {p.stem: json.loads(p.read_text())["error"] for p in sorted(folder.glob("*.json"))}
+
+    # ------------------------------------------------------------------ results
+    def results(self) -> pa.Table:
+        """All finished rows, sorted by formulation, replica and parameter set."""
+        files = sorted((self.folder / "parts").glob("*.parquet"))
+        if not files:
+            raise CampaignError(f"{str(self.folder)!r} has no finished solve yet")
+        table = pa.concat_tables([pq.read_table(f) for f in files], promote_options="default")
+        return table.sort_by([(k, "ascending") for k in RESULT_KEY])
+
+    def export_csv(self, path: str | Path) -> Path:
+        """All finished rows as one CSV file (written atomically)."""
+        with atomic_path(path) as tmp:
+            pa.csv.write_csv(self.results(), tmp)
+        return Path(path)
+
+    def status(self) -> CampaignStatus:
+        camp = self.campaign()
+        tasks = camp.tasks()
+        done = self.done_tasks()
+        solves_done = sum(len(t.set_indices) for t in tasks if t.task_id in done)
+        return CampaignStatus(camp.name, len(done & {t.task_id for t in tasks}), len(tasks),
+                              solves_done, camp.n_solves(),
+                              {k: v for k, v in self.failures().items() if k not in done})
