@@ -260,3 +260,15 @@ def test_campaign_checks_name_the_key():
                                "base": {"Rff_Al2O3_Al2O3": 2e-7},
                                "design": {"kind": "table4"}})
     assert len(area.parameter_sets(area.formulations[0])) == 320  # the paper's count
+
+
+# solves each shipped example states in its comments: Table 4 under the gap model is
+# 5 k x 8 R_fp = 40 sets per single-filler RVE and 8 x 8 = 64 per hybrid RVE
+EXAMPLES = {"campaign-tiny.toml": 12, "campaign-paper-al2o3.toml": 4 * 3 * 40,
+            "campaign-paper-aln.toml": 4 * 3 * 40, "campaign-paper-hybrid.toml": 4 * 3 * 64}
+
+
+@pytest.mark.parametrize("name,solves", EXAMPLES.items(), ids=list(EXAMPLES))
+def test_shipped_example_campaigns_are_valid(name, solves):
+    camp = Campaign.from_toml(ROOT / "examples" / name)
+    assert camp.n_solves() == solves and camp.contact == "gap"
