@@ -2,9 +2,12 @@
 
 Defaults come from the package's own studies, not from convenience:
 
-- voxel 0.16 um: the largest voxel within 2 % of the converged k_eff on dense 60 % Al2O3
-  RVEs at the paper's resistances (``validation/results/resolution.md``: +1.45 % and
-  +1.75 % on two packings; 0.4 um reads +16 %, 0.32 um +12 %);
+- the gap contact model (the package default): contacts are the two particle-matrix
+  resistances and the silicone film between the spheres, so the paper's Al2O3-silicone
+  resistance (Table 5) is the only interface value, and k_eff converges under refinement;
+- voxel 0.16 um: reads 1.40 % and 1.47 % below the extrapolated k_eff on two dense 60 %
+  Al2O3 packings (``validation/results/resolution.md``; first-order convergence, the same
+  bias on both packings); 0.125 um reads -1.0 %, 0.0625 um -0.5 %;
 - the FFT solver: the same discrete system as the FV reference to solver tolerance
   (``validation/results/crossval.md``) and 4-7x faster on these grids
   (``validation/results/bench_solvers.md``);
@@ -29,19 +32,19 @@ PAPER_K = {"silicone": 0.18, "Al2O3": 30.0, "AlN": 200.0}
 PAPER_R = {("Al2O3", "silicone"): 2.2e-8, ("AlN", "silicone"): 3.0e-8,
            ("Al2O3", "Al2O3"): 2.0e-7, ("AlN", "AlN"): 1.0e-7, ("Al2O3", "AlN"): 3.0e-7}
 
-#: Measured discretisation bias of k_iso against the extrapolated value, per voxel (um):
-#: (smallest, largest) over two packings, %, dense 60 % Al2O3 at the paper's resistances
-#: (validation/results/resolution.md).
-VOXEL_BIAS = {0.4: (15.62, 16.62), 0.32: (10.87, 12.14), 0.25: (6.87, 6.89),
-              0.2: (3.37, 3.76), 0.16: (1.45, 1.75), 0.125: (0.38, 0.57),
-              0.1: (-0.13, 0.07), 0.08: (-0.14, 0.06)}
+#: Measured discretisation bias of k_iso against the Richardson-extrapolated value, per
+#: voxel (um): (smallest, largest) over two packings, %, dense 60 % Al2O3 under the gap model
+#: at the paper's Al2O3-silicone resistance (validation/results/resolution.md).
+VOXEL_BIAS = {0.25: (-2.50, -2.46), 0.2: (-1.92, -1.86), 0.16: (-1.47, -1.40),
+              0.125: (-1.04, -1.03), 0.1: (-0.78, -0.77), 0.08: (-0.61, -0.60),
+              0.0625: (-0.48, -0.47)}
 
 #: RVE-to-RVE scatter of k_iso at the demo's default settings (16 um box, 0.16 um voxel,
-#: 55 % Al2O3): relative standard deviation and full range over seeds 1-4, %, of k_iso
-#: and of the single diagonal components. Measured with ``itr demo --seed N``: k_iso =
-#: 1.3127, 1.3099, 1.3213, 1.3174 W/(m K); k_xx, k_yy, k_zz from 1.275 to 1.346.
-DEMO_SCATTER = {"seeds": 4, "std_percent": 0.4, "range_percent": 0.9,
-                "component_std_percent": 1.6, "component_range_percent": 5.4}
+#: 55 % Al2O3, gap model): relative standard deviation and full range over seeds 1-4, %, of
+#: k_iso and of the single diagonal components. Measured (itr_fft, tol 1e-8): k_iso = 1.3459,
+#: 1.3400, 1.3567, 1.3467 W/(m K) for seeds 1-4; k_xx, k_yy, k_zz from 1.313 to 1.380.
+DEMO_SCATTER = {"seeds": 4, "std_percent": 0.5, "range_percent": 1.2,
+                "component_std_percent": 1.5, "component_range_percent": 5.0}
 
 
 @dataclass(frozen=True)
@@ -65,12 +68,13 @@ def bias_note(voxel_um: float) -> str:
     known = sorted(VOXEL_BIAS)
     if voxel_um < known[0]:
         return (f"voxel {voxel_um:g} um is finer than the resolution study's finest "
-                f"({known[0]:g} um, bias within 0.2 %)")
+                f"({known[0]:g} um, bias {VOXEL_BIAS[known[0]][0]:+.1f} %)")
     # nearest studied voxel at or above this one bounds the bias from above
     above = min((v for v in known if v >= voxel_um - 1e-12), default=None)
     if above is None:
         return (f"voxel {voxel_um:g} um is coarser than anything the resolution study measured "
-                f"(0.4 um already reads +16 %): expect k_eff well above the converged value")
+                f"({known[-1]:g} um already reads {VOXEL_BIAS[known[-1]][0]:+.1f} %): expect "
+                "k_eff further below the converged value")
     lo, hi = VOXEL_BIAS[above]
     span = f"{lo:+.1f} %" if abs(hi - lo) < 0.05 else f"{lo:+.1f} to {hi:+.1f} %"
     if abs(above - voxel_um) < 1e-9:
@@ -79,7 +83,7 @@ def bias_note(voxel_um: float) -> str:
         where = (f"voxel {voxel_um:g} um: discretisation bias at most that of {above:g} um, "
                  f"the next coarser voxel studied ({span})")
     return (f"{where} against the converged k_eff (validation/results/resolution.md, "
-            "60 % Al2O3, paper resistances)")
+            "60 % Al2O3, gap model, paper resistance)")
 
 
 def scatter_note(settings: "DemoSettings") -> str:

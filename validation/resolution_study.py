@@ -92,7 +92,7 @@ def report(rows: list[dict], out: Path) -> None:
              "previous (%) | bias vs k_0 (%) | filled voxels | contact faces | total spot "
              "conductance (W/K) | iterations | wall (s) |",
              "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
-    summary = []
+    summary, biases = [], []
     for model, seed in RUNS:
         mine = sorted((r for r in rows if r["model"] == model and int(r["seed"]) == seed),
                       key=lambda r: -float(r["voxel_um"]))
@@ -109,13 +109,30 @@ def report(rows: list[dict], out: Path) -> None:
                          f"{r['contact_faces']} | {float(r['spot_conductance_W_per_K']):.4g} | "
                          f"{r['iterations']} | {r['wall_s']} |")
         steps = [100 * (ks[i] / ks[i - 1] - 1) for i in range(1, len(ks))]
+        if model == "gap":
+            biases.append({h: 100 * (k / k0 - 1) for h, k in zip(hs, ks)})
+        monotone = all(x > 0 for x in steps) or all(x < 0 for x in steps)
         summary.append(
             f"- {model}, seed {seed}: k_iso {ks[0]:.4f} -> {ks[-1]:.4f} W/(m K) from {hs[0]:g} "
             f"to {hs[-1]:g} um ({100 * (ks[-1] / ks[0] - 1):+.2f} %); steps "
             + ", ".join(f"{s:+.2f}" for s in steps)
             + f" %; between the two finest {steps[-1]:+.2f} %; k_0 = {k0:.4f}; bias at "
-            + ", ".join(f"{h:g} um {100 * (k / k0 - 1):+.2f} %" for h, k in zip(hs, ks)))
-    lines += ["", "## Summary", ""] + summary
+            + ", ".join(f"{h:g} um {100 * (k / k0 - 1):+.2f} %" for h, k in zip(hs, ks))
+            + ("" if monotone else " (the steps change sign: no first-order trend, so k_0 "
+               "and the bias are shown for reference only)"))
+    lines += ["", "## Summary", ""] + summary + ["", "## Recommended voxel", ""]
+    if biases:
+        common = sorted(set.intersection(*(set(b) for b in biases)), reverse=True)
+        ok = [h for h in common if all(abs(b[h]) <= 1.5 for b in biases)]
+        if ok:
+            h = ok[0]
+            vals = [b[h] for b in biases]
+            lines.append(
+                f"**{h:g} um**: the largest voxel whose bias is within 1.5 % on every packing "
+                f"({', '.join(f'{v:+.2f} %' for v in vals)}). The gap model converges at first "
+                "order in h with the same bias on every packing (to "
+                f"{max(vals) - min(vals):.2f} % here), so results at this voxel can be "
+                "corrected by that bias or extrapolated from two voxel sizes.")
     out.write_text("\n".join(lines) + "\n")
     print(f"wrote {out}")
 
