@@ -315,7 +315,8 @@ def write_report(rows: list[dict], elapsed: float | None = None) -> None:
         over = [k for e, k in vals if e > bound[g]]
         L.append(f"| {g} | {len(vals)} | {100 * worst[0]:.3f} | "
                  f"{_case_label(*worst[1][2:])} | {100 * bound[g]:g} | "
-                 f"{len(over)}{': ' + '; '.join(_case_label(*k[2:]) for k in over) if over else ''} |")
+                 f"{len(over)}"
+                 f"{': ' + '; '.join(_case_label(*k[2:]) for k in over) if over else ''} |")
     L.append("")
     # hardest cases
     hard = sorted(((abs(v[2][v[0].index(128)]), k, v) for k, v in at128), reverse=True)[:8]
