@@ -9,7 +9,7 @@ import numpy as np
 
 from .checks import phase_name as _check_name
 from .checks import real_number
-from .parameters import parameter_name, parse_parameter
+from .parameters import UNITS, parameter_name, parse_parameter
 
 __all__ = ["Materials", "CONTACT_MODELS"]
 
@@ -223,6 +223,12 @@ class Materials:
         k, r, spots = {}, {}, {}
         for name, value in parameters.items():
             kind, phases = parse_parameter(name)
+            v = real_number(value, f"parameter {name!r}")
+            bad = (not math.isfinite(v) or v <= 0) if kind == "k" else \
+                (math.isnan(v) or v < 0 or (kind == "Gc" and math.isinf(v)))
+            if bad:
+                rule = {"k": "finite and > 0", "Gc": "finite and >= 0"}.get(kind, ">= 0 or inf")
+                raise ValueError(f"parameter {name!r} must be {rule} {UNITS[kind]}, got {v!r}")
             if kind == "k":
                 k[phases[0]] = value
             elif kind == "R":

@@ -179,7 +179,7 @@ BAD = [
     (lambda d: d.update(bogus=1), "unknown key 'bogus'"),
     (lambda d: d.pop("formulation"), "missing key 'formulation'"),
     (lambda d: d.pop("box_um"), "missing key 'box_um'"),
-    (lambda d: d.update(base={"R_Al2O3_silicone": -1e-8}), "must be >= 0"),
+    (lambda d: d.update(base={"R_Al2O3_silicone": -1e-8}), "R_Al2O3_silicone' must be >= 0"),
     (lambda d: _set_fraction(d, 0.75), "beyond what can be packed"),
     (lambda d: d.update(design={"kind": "sobol"}), "design.kind"),
     (lambda d: d.update(voxel_um=0.3), "whole number"),

@@ -47,7 +47,9 @@ def test_area_materials_use_rff_and_with_parameters_replaces_one_value():
     ({"k_silicone": 0.18, "k_Al2O3": 30.0, "Rff_Al2O3_Al2O3": 1e-7}, "gap", "contact='area'"),
     ({"k_silicone": 0.18, "R_Al2O3_silicone": 1e-8}, "gap", "k_Al2O3"),
     ({"k_silicone": 0.18, "k_Al2O3": 30.0, "Gc_Al2O3_Al2O3": 1e-6}, "area", "contact='gap'"),
-    ({"k_silicone": -1.0}, "gap", "conductivity"),
+    ({"k_silicone": -1.0}, "gap", r"k_silicone' must be finite and > 0 W/\(m K\)"),
+    ({"k_silicone": 0.18, "k_Al2O3": 30.0, "Gc_Al2O3_Al2O3": float("inf")}, "gap", "finite"),
+    ({"k_silicone": True}, "gap", "boolean"),
 ])
 def test_bad_parameter_sets_name_the_parameter(params, contact, match):
     with pytest.raises(ValueError, match=match):
