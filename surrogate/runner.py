@@ -129,13 +129,15 @@ def _row(camp: Campaign, task: Task, index: int, rid: str, mat, res, wall: float
 
 def worker_memory(camp: Campaign) -> int:
     """Bytes a worker needs for one task: the solver's peak estimate with the fields kept,
-    plus the warm-start fields of a block, plus 0.5 GB for the interpreter and libraries."""
+    plus the warm-start fields of a block, plus 1 GB for the interpreter and its libraries
+    (numba, scipy, pyarrow, dask: ~0.4 GB resident; dask pauses a worker at 80 % of its
+    limit)."""
     from itr_fv.resources import estimate_peak_memory
 
     solver = "itr_fv" if camp.solver == "fv" else "itr_fft"
     peak = estimate_peak_memory(camp.shape, solver, store_fields=True)
     fields = 3 * 8 * int(np.prod(camp.shape)) * camp.block_size
-    return int(peak + fields + 5e8)
+    return int(peak + fields + 1e9)
 
 
 def _client(workers: int | None, scheduler: str | None, camp: Campaign, echo: Callable):
@@ -186,9 +188,6 @@ def run_campaign(campaign: Campaign, folder: str | Path, *, workers: int | None 
     -------
     RunSummary
     """
-    from dask.distributed import as_completed
-    from tqdm import tqdm
-
     t0 = time.perf_counter()
     store = CampaignStore(folder)
     store.check_for(campaign)
@@ -199,28 +198,13 @@ def run_campaign(campaign: Campaign, folder: str | Path, *, workers: int | None 
         echo(f"campaign {campaign.name}: all {len(tasks)} tasks are done; nothing to solve")
         return RunSummary(0, len(tasks), 0, 0, time.perf_counter() - t0, 0)
     client, cluster = _client(workers, scheduler, campaign, echo)
-    store.open_for(campaign)
-    n_workers = len(client.scheduler_info().get("workers", {}))
-    echo(f"campaign {campaign.name}: {len(todo)} of {len(tasks)} tasks to run "
-         f"({sum(len(t.set_indices) for t in todo)} solves on {campaign.shape[0]}^3 voxels, "
-         f"{n_workers} workers)")
-    spec = campaign.to_dict()
-    failed = solves = 0
     try:
-        futures = [client.submit(run_task, spec, _task_dict(t), str(store.folder),
-                                 key=f"itr-{campaign.fingerprint()[:8]}-{t.task_id}", pure=False)
-                   for t in todo]
-        bar = tqdm(total=len(todo), unit="task", disable=not progress, desc=campaign.name)
-        for fut in as_completed(futures):
-            try:
-                solves += fut.result()["solves"]
-            except Exception as exc:  # noqa: BLE001 - a task's failure is recorded, not fatal
-                failed += 1
-                task_id = str(fut.key).split("-", 2)[-1]
-                store.record_failure(task_id, f"{type(exc).__name__}: {exc}")
-            bar.update(1)
-            bar.set_postfix(solves=solves, failed=failed)
-        bar.close()
+        n_workers = _wait_for_workers(client, scheduler)
+        store.open_for(campaign)
+        echo(f"campaign {campaign.name}: {len(todo)} of {len(tasks)} tasks to run "
+             f"({sum(len(t.set_indices) for t in todo)} solves on {campaign.shape[0]}^3 "
+             f"voxels, {n_workers} workers)")
+        solves, failed = _execute(client, campaign, todo, store, progress)
     finally:
         client.close()
         if cluster is not None:
@@ -230,6 +214,42 @@ def run_campaign(campaign: Campaign, folder: str | Path, *, workers: int | None 
     echo(f"campaign {campaign.name}: {summary.tasks_run} tasks ({solves} solves) in "
          f"{summary.wall_s:.1f} s on {n_workers} workers; {failed} failed")
     return summary
+
+
+def _wait_for_workers(client, scheduler: str | None) -> int:
+    """Number of workers, waiting up to 60 s for a first one on an external scheduler."""
+    n = len(client.scheduler_info().get("workers", {}))
+    if n:
+        return n
+    try:
+        client.wait_for_workers(1, timeout=60)
+    except TimeoutError:
+        raise CampaignError(f"--scheduler: no worker joined {scheduler!r} within 60 s; start "
+                            "workers with 'dask worker ADDRESS'") from None
+    return len(client.scheduler_info().get("workers", {}))
+
+
+def _execute(client, campaign: Campaign, todo: list[Task], store: CampaignStore,
+             progress: bool) -> tuple[int, int]:
+    """Submit the tasks, record each failure, show progress; returns (solves, failures)."""
+    from dask.distributed import as_completed
+    from tqdm import tqdm
+
+    spec = campaign.to_dict()
+    prefix = f"itr-{campaign.fingerprint()[:8]}-"
+    futures = [client.submit(run_task, spec, _task_dict(t), str(store.folder),
+                             key=prefix + t.task_id, pure=False) for t in todo]
+    failed = solves = 0
+    with tqdm(total=len(todo), unit="task", disable=not progress, desc=campaign.name) as bar:
+        for fut in as_completed(futures):
+            try:
+                solves += fut.result()["solves"]
+            except Exception as exc:  # noqa: BLE001 - a task's failure is recorded, not fatal
+                failed += 1
+                store.record_failure(str(fut.key)[len(prefix):], f"{type(exc).__name__}: {exc}")
+            bar.update(1)
+            bar.set_postfix(solves=solves, failed=failed)
+    return solves, failed
 
 
 def _task_dict(task: Task) -> dict:

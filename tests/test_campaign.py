@@ -272,3 +272,35 @@ EXAMPLES = {"campaign-tiny.toml": 12, "campaign-paper-al2o3.toml": 4 * 3 * 40,
 def test_shipped_example_campaigns_are_valid(name, solves):
     camp = Campaign.from_toml(ROOT / "examples" / name)
     assert camp.n_solves() == solves and camp.contact == "gap"
+
+
+def test_a_failed_task_is_recorded_and_the_others_finish(tmp_path, monkeypatch):
+    """One task raising on the worker: the run goes on, status names the task and its error,
+    and the next run solves only that task and clears the record."""
+    from dask.distributed import LocalCluster
+
+    import surrogate.runner as runner
+
+    camp = Campaign.from_dict({**_small_dict(), "replicas": 1, "block_size": 3})
+    real = runner.run_task
+
+    def flaky(spec, task, folder):
+        if task["block"] == 1:
+            raise RuntimeError("injected failure")
+        return real(spec, task, folder)
+
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
+                      dashboard_address=None) as cluster:
+        monkeypatch.setattr(runner, "run_task", flaky)
+        first = runner.run_campaign(camp, tmp_path / "c", scheduler=cluster.scheduler_address,
+                                    progress=False, echo=lambda m: None)
+        status = CampaignStore(tmp_path / "c").status()
+        assert (first.tasks_run, first.tasks_failed) == (1, 1)
+        assert status.tasks_done == 1 and "injected failure" in status.failures[
+            "Al2O3-30__r0__b0001"]
+        monkeypatch.setattr(runner, "run_task", real)
+        second = runner.run_campaign(camp, tmp_path / "c", scheduler=cluster.scheduler_address,
+                                     progress=False, echo=lambda m: None)
+    assert (second.tasks_run, second.tasks_skipped, second.solves) == (1, 1, 3)
+    final = CampaignStore(tmp_path / "c").status()
+    assert final.complete and final.failures == {}
