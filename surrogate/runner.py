@@ -201,6 +201,7 @@ def run_campaign(campaign: Campaign, folder: str | Path, *, workers: int | None 
     try:
         n_workers = _wait_for_workers(client, scheduler)
         store.open_for(campaign)
+        store.remove_partial_files()
         echo(f"campaign {campaign.name}: {len(todo)} of {len(tasks)} tasks to run "
              f"({sum(len(t.set_indices) for t in todo)} solves on {campaign.shape[0]}^3 "
              f"voxels, {n_workers} workers)")

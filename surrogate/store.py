@@ -131,8 +131,23 @@ class CampaignStore:
         return self.folder / "parts" / f"{task_id}.parquet"
 
     def done_tasks(self) -> set[str]:
+        """Tasks whose part file exists (temporary files of unfinished writes do not count)."""
         parts = self.folder / "parts"
-        return {p.stem for p in parts.glob("*.parquet")} if parts.is_dir() else set()
+        if not parts.is_dir():
+            return set()
+        return {p.stem for p in parts.glob("*.parquet") if not p.name.startswith(".")}
+
+    def remove_partial_files(self) -> int:
+        """Delete the temporary files that a killed run left behind; returns their number.
+
+        Call only when no other run writes into this folder.
+        """
+        count = 0
+        for sub in ("parts", "rves", "failures"):
+            for p in (self.folder / sub).glob(".itr-partial-*"):
+                p.unlink(missing_ok=True)
+                count += 1
+        return count
 
     def write_part(self, task_id: str, rows: list[dict]) -> Path:
         """Write one task's rows (atomically) and clear its failure record."""
@@ -174,7 +189,8 @@ class CampaignStore:
     # ------------------------------------------------------------------ results
     def results(self) -> pa.Table:
         """All finished rows, sorted by formulation, replica and parameter set."""
-        files = sorted((self.folder / "parts").glob("*.parquet"))
+        files = sorted(p for p in (self.folder / "parts").glob("*.parquet")
+                       if not p.name.startswith("."))
         if not files:
             raise CampaignError(f"{str(self.folder)!r} has no finished solve yet")
         table = pa.concat_tables([pq.read_table(f) for f in files], promote_options="default")
