@@ -64,10 +64,9 @@ def _export(args: argparse.Namespace) -> int:
     store = _store(args.dir)
     try:
         path = output_file(args.csv, ".csv", "--csv")
-        store.export_csv(path)
+        rows = store.export_csv(path)
     except (ValueError, CampaignError) as exc:
         raise CLIError(str(exc), 2) from None
-    rows = store.results().num_rows
     print(f"wrote {path} ({rows} rows)")
     return 0
 

@@ -25,12 +25,13 @@ from pathlib import Path
 
 import numpy as np
 
+from surrogate import paper_data
+
 __all__ = ["DemoSettings", "run_demo", "PAPER_K", "PAPER_R", "VOXEL_BIAS", "DEMO_SCATTER"]
 
 # The paper's identified resistances (Table 5), m^2 K/W, and its conductivities, W/(m K).
-PAPER_K = {"silicone": 0.18, "Al2O3": 30.0, "AlN": 200.0}
-PAPER_R = {("Al2O3", "silicone"): 2.2e-8, ("AlN", "silicone"): 3.0e-8,
-           ("Al2O3", "Al2O3"): 2.0e-7, ("AlN", "AlN"): 1.0e-7, ("Al2O3", "AlN"): 3.0e-7}
+PAPER_K = paper_data.PAPER_CONDUCTIVITY
+PAPER_R = paper_data.paper_resistances()
 
 #: Measured discretisation bias of k_iso against the Richardson-extrapolated value, per
 #: voxel (um): (smallest, largest) over two packings, %, dense 60 % Al2O3 under the gap model

@@ -64,8 +64,7 @@ from . import paper_data
 __all__ = ["Campaign", "Formulation", "Task", "CampaignError", "PAPER_BASE", "nearest_solved"]
 
 #: The paper's conductivities (W/(m K)) and Table 5 filler-matrix resistances (m^2 K/W).
-PAPER_BASE = {"k_silicone": 0.18, "k_Al2O3": 30.0, "k_AlN": 200.0,
-              "R_Al2O3_silicone": 2.2e-8, "R_AlN_silicone": 3.0e-8}
+PAPER_BASE = paper_data.paper_parameters()
 
 _TOP_KEYS = {"name", "box_um", "voxel_um", "replicas", "seed", "contact", "solver", "tol",
              "block_size", "max_diameter_box_ratio", "min_gap_um", "threads_per_worker",

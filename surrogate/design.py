@@ -23,10 +23,12 @@ import numpy as np
 
 from itr_fv.parameters import is_log_scaled, parameter_name, parse_parameter
 
+from . import paper_data
+
 __all__ = ["grid", "table4", "space_filling", "TABLE4_HYBRID_K"]
 
 #: Filler conductivities the paper fixes for the hybrids (W/(m K)).
-TABLE4_HYBRID_K = {"Al2O3": 30.0, "AlN": 200.0}
+TABLE4_HYBRID_K = {f: paper_data.PAPER_CONDUCTIVITY[f] for f in ("Al2O3", "AlN")}
 
 
 def _check_names(names: Sequence[str], argument: str) -> None:
@@ -60,8 +62,6 @@ def grid(values: Mapping[str, Sequence[float]]) -> list[dict[str, float]]:
 
 
 def _table4_values() -> dict[str, list[float]]:
-    from . import paper_data
-
     out = {}
     for row in paper_data.read_table("parameter_grid"):
         out[row["parameter"]] = [float(v) for v in row["values"].split(";")]
@@ -119,8 +119,7 @@ def space_filling(bounds: Mapping[str, Sequence[float]], n: int, seed: int
             raise ValueError(f"bounds: {name} needs (lo, hi), got {pair!r}")
         a, b = float(pair[0]), float(pair[1])
         log = is_log_scaled(name)
-        if not (math.isfinite(a) and math.isfinite(b) and 0 < a < b) and log or \
-                not (math.isfinite(a) and math.isfinite(b) and a < b):
+        if not (math.isfinite(a) and math.isfinite(b) and a < b and (a > 0 or not log)):
             raise ValueError(f"bounds: {name} needs finite lo < hi{' > 0' if log else ''}, "
                              f"got ({a:g}, {b:g})")
         lo.append(math.log10(a) if log else a)

@@ -11,6 +11,7 @@ import csv
 from importlib import resources
 
 __all__ = ["read_table", "formulations", "psd_lognormal", "paper_resistances",
+           "PAPER_CONDUCTIVITY", "paper_parameters",
            "paper_validation", "measured_conductivities"]
 
 TABLES = ("formulations", "measured_tc", "paper_itr", "paper_validation", "parameter_grid",
@@ -39,6 +40,22 @@ def psd_lognormal() -> dict[str, tuple[float, float]]:
     """Table 1: filler -> (mu, sigma) of ln(D / 1 um)."""
     return {r["material"]: (float(r["mu_ln_um"]), float(r["sigma_ln"]))
             for r in read_table("psd_lognormal")}
+
+
+#: The conductivities the paper simulates with, W/(m K) (Sections 2.4 and 3.2: silicone
+#: 0.18, Al2O3 30, AlN 200; the hybrids are simulated at these fixed values).
+PAPER_CONDUCTIVITY = {"silicone": 0.18, "Al2O3": 30.0, "AlN": 200.0}
+
+
+def paper_parameters(matrix: str = "silicone") -> dict[str, float]:
+    """The paper's values under the flat names: ``k_<phase>`` of :data:`PAPER_CONDUCTIVITY`
+    and the filler-matrix resistances ``R_<filler>_<matrix>`` of Table 5."""
+    from itr_fv.parameters import parameter_name
+
+    out = {parameter_name("k", p): v for p, v in PAPER_CONDUCTIVITY.items()}
+    out.update({parameter_name("R", a, b): v for (a, b), v in paper_resistances().items()
+                if matrix in (a, b)})
+    return out
 
 
 def paper_resistances() -> dict[tuple[str, str], float]:

@@ -45,15 +45,17 @@ class RunSummary:
     workers: int
 
 
-def _solve_function(solver: str, shape: tuple[int, int, int]) -> Callable:
+def _solver(camp: Campaign) -> tuple[Callable, dict]:
+    """The campaign's homogenize function and the keyword arguments only it takes."""
+    solver = camp.solver
     if solver == "auto":
         from .solver_choice import choose_solver
-        solver = "fv" if choose_solver(shape) == "itr_fv" else "fft"
+        solver = "fv" if choose_solver(camp.shape) == "itr_fv" else "fft"
     if solver == "fv":
         import itr_fv
-        return itr_fv.homogenize
+        return itr_fv.homogenize, {}
     import itr_fft
-    return itr_fft.homogenize
+    return itr_fft.homogenize, {"workers": camp.threads_per_worker}
 
 
 def _build_rve(camp: Campaign, task: Task):
@@ -88,18 +90,16 @@ def run_task(campaign: dict, task: dict, folder: str) -> dict:
                      "seed": task.seed, "box_um": camp.box_um, "voxel_um": camp.voxel_um,
                      "shape": list(ms.shape), "matrix": camp.matrix})
     problem = DiscreteProblem(ms, contact=camp.contact)
-    solve = _solve_function(camp.solver, ms.shape)
+    solve, options = _solver(camp)
     sets = camp.parameter_sets(camp.formulation(task.formulation))
     solved, thetas, rows = [], [], []
     for i in task.set_indices:
         pset = sets[i]
         mat = camp.materials(pset)
         near = nearest_solved(pset, solved)
-        kwargs = {"workers": camp.threads_per_worker} if solve.__module__.startswith(
-            "itr_fft") else {}
         t = time.perf_counter()
         res = solve(problem, mat, tol=camp.tol, x0=None if near is None else thetas[near],
-                    **kwargs)
+                    **options)
         wall = time.perf_counter() - t
         solved.append(pset)
         thetas.append(np.stack(res.theta))

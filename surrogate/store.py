@@ -189,18 +189,18 @@ class CampaignStore:
     # ------------------------------------------------------------------ results
     def results(self) -> pa.Table:
         """All finished rows, sorted by formulation, replica and parameter set."""
-        files = sorted(p for p in (self.folder / "parts").glob("*.parquet")
-                       if not p.name.startswith("."))
+        files = [self.part_path(t) for t in sorted(self.done_tasks())]
         if not files:
             raise CampaignError(f"{str(self.folder)!r} has no finished solve yet")
         table = pa.concat_tables([pq.read_table(f) for f in files], promote_options="default")
         return table.sort_by([(k, "ascending") for k in RESULT_KEY])
 
-    def export_csv(self, path: str | Path) -> Path:
-        """All finished rows as one CSV file (written atomically)."""
+    def export_csv(self, path: str | Path) -> int:
+        """All finished rows as one CSV file (written atomically); returns the row count."""
+        table = self.results()
         with atomic_path(path) as tmp:
-            pa.csv.write_csv(self.results(), tmp)
-        return Path(path)
+            pa.csv.write_csv(table, tmp)
+        return table.num_rows
 
     def status(self) -> CampaignStatus:
         camp = self.campaign()

@@ -5,11 +5,11 @@ box), voxelized and solved with itr_fft (tol 1e-6, three load cases) under the g
 model with the paper's particle-matrix resistances (Table 5: Al2O3-silicone 2.2e-8,
 AlN-silicone 3.0e-8 m^2 K/W) and no contact parameter: a contact is two particle-matrix
 interfaces and the true silicone film between the spheres (the paper's Eq. 6). k_Al2O3 =
-30, k_AlN = 200, k_silicone = 0.18 W/(m K) (the paper's values). Box and voxel are the
-recommended ones of ``box_size.md`` and ``resolution.md``: 24 um for Al2O3, 40 um for AlN
-and the hybrids, 0.16 um voxels; two packings (seeds 1, 2) per formulation. The table sets
-k_iso (trace / 3) beside the measured mean of Table 3 and the paper's own prediction of
-Table 6 (made with its per-area contact resistances). Rows are kept in
+30, k_AlN = 200, k_silicone = 0.18 W/(m K) (the paper's values, ``surrogate.paper_data``).
+Box and voxel are the recommended ones of ``box_size.md`` and ``resolution.md``: 24 um
+for Al2O3, 40 um for AlN and the hybrids, 0.16 um voxels; two packings (seeds 1, 2) per
+formulation. The table sets k_iso (trace / 3) beside the measured mean of Table 3 and the
+paper's own prediction of Table 6 (made with its per-area contact resistances). Rows are kept in
 ``paper_formulations.csv`` (a re-run skips the solved ones). Writes
 ``validation/results/paper_formulations.md``.
 
@@ -31,7 +31,6 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from csv_store import append_row, load_rows  # noqa: E402
 
-K = {"silicone": 0.18, "Al2O3": 30.0, "AlN": 200.0}
 BOX_UM = {"Al2O3": 24.0, "AlN": 40.0, "hybrid": 40.0}
 FINDINGS = """## Findings
 
@@ -67,9 +66,9 @@ def solve(name: str, fractions: dict, seed: int, voxel_um: float) -> dict:
     import numpy as np
 
     import itr_fft
-    from surrogate import paper_data
     from itr_fv import Materials
     from itr_fv.rve import FillerSpec, generate_rve
+    from surrogate import paper_data
 
     psd = paper_data.psd_lognormal()
     table5 = paper_data.paper_resistances()
@@ -80,7 +79,7 @@ def solve(name: str, fractions: dict, seed: int, voxel_um: float) -> dict:
         warnings.simplefilter("ignore")  # the box cut of AlN is reported in box_size.md
         ms = generate_rve(specs, box_um=box, voxel_um=voxel_um, seed=seed, matrix="silicone",
                           max_diameter_box_ratio=0.45)
-    mat = Materials({p: K[p] for p in ("silicone", *fractions)},
+    mat = Materials({p: paper_data.PAPER_CONDUCTIVITY[p] for p in ("silicone", *fractions)},
                     {(f, "silicone"): table5[(f, "silicone")] for f in fractions},
                     matrix="silicone", contact="gap")
     t = time.perf_counter()
