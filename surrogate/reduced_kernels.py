@@ -1,9 +1,10 @@
 """Compiled online stage of the reduced-basis model: many parameter sets, one small system each.
 
 For every parameter set the reduced operator ``M = sum_t theta_t G_t`` (S x S) is assembled
-(one matrix product per chunk of parameter sets), each load case's Galerkin block is solved by Cholesky, and ``K = C^T M C`` is formed; one
-parallel loop over the parameter sets, each iteration a serial helper (no reduction variable
-in the parallel body). Kernels are cached on disk (:mod:`itr_fv.numba_cache`).
+(one matrix product per chunk of parameter sets), each load case's Galerkin block is solved
+by Cholesky, and ``K = C^T M C`` is formed: one parallel loop over the parameter sets, each
+iteration a serial helper (no reduction variable in the parallel body). Kernels are cached
+on disk (:mod:`itr_fv.numba_cache`).
 """
 
 from __future__ import annotations
