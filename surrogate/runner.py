@@ -30,7 +30,7 @@ from itr_fv.parameters import parse_parameter
 from .campaign import Campaign, CampaignError, Task, nearest_solved
 from .store import CampaignStore, rve_id
 
-__all__ = ["run_campaign", "run_task", "RunSummary", "worker_memory"]
+__all__ = ["run_campaign", "run_task", "build_rve", "RunSummary", "worker_memory"]
 
 
 @dataclass(frozen=True)
@@ -67,6 +67,16 @@ def _build_rve(camp: Campaign, task: Task):
         return generate_rve(form.specs(), box_um=camp.box_um, voxel_um=camp.voxel_um,
                             seed=task.seed, min_gap_um=camp.min_gap_um, matrix=camp.matrix,
                             max_diameter_box_ratio=camp.max_diameter_box_ratio)
+
+
+def build_rve(camp: Campaign, formulation: str, replica: int):
+    """The RVE (Microstructure) that a campaign's tasks solve for one formulation and replica:
+    packed from the same seed, so the same particles as in the campaign's results."""
+    for task in camp.tasks():
+        if task.formulation == formulation and task.replica == replica:
+            return _build_rve(camp, task)
+    raise ValueError(f"formulation/replica: the campaign {camp.name!r} has no RVE "
+                     f"({formulation!r}, replica {replica})")
 
 
 def run_task(campaign: dict, task: dict, folder: str) -> dict:
