@@ -166,6 +166,8 @@ def build_parser() -> argparse.ArgumentParser:
     demo.set_defaults(func=_demo)
     from .campaign_cli import add_campaign_parser
     add_campaign_parser(sub, _Parser, _number)
+    from .surrogate_cli import add_surrogate_parser
+    add_surrogate_parser(sub, _Parser, _number)
     return parser
 
 
