@@ -178,3 +178,11 @@ def test_bad_parameter_sets_name_the_parameter(rb, sets, match):
 def test_unfitted_model_says_so(problem, materials):
     with pytest.raises(ValueError, match="not fitted"):
         ReducedBasis(problem, materials, BOUNDS).predict({"k_Al2O3": 30.0})
+
+
+def test_stopping_at_max_solves_warns_and_says_so(problem, materials):
+    from surrogate.reduced_basis import ReducedBasisWarning
+
+    with pytest.warns(ReducedBasisWarning, match="above tol"):
+        rb = ReducedBasis(problem, materials, BOUNDS, tol=1e-6, max_solves=1, solver="fv").fit()
+    assert not rb.converged_ and rb.n_solves_ == 1 and rb.training_gap_ > 1e-6

@@ -1,0 +1,249 @@
+"""Measured effective conductivities: tables, the tester's data reduction, replicate statistics.
+
+Two kinds of CSV file:
+
+- a *measurement table* (the paper's Table 3 is shipped and the default):
+  ``formulation,replicate,k_W_per_mK``, one row per sample;
+- *tester readings* (Methods, Eqs. 7-10): ``formulation,replicate,thickness_mm,
+  impedance_K_mm2_per_W``, the thermal impedance ``I = A dT / Q`` of one sample at several
+  thicknesses. The contact resistance between sample and meter bars is the intercept of
+  ``I = a t + b`` (Eq. 8), so ``K = 1 / a`` (Eq. 10) with the slope's standard error.
+
+Every formulation needs at least two replicates (its variance enters the likelihood of
+:mod:`identify.calibrate`); errors are ValueErrors that name the file, the line and the
+column.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["Measurements", "read_measurements", "read_tester_readings",
+           "conductivity_from_impedance", "TABLE3"]
+
+TABLE_COLUMNS = ("formulation", "replicate", "k_W_per_mK")
+READING_COLUMNS = ("formulation", "replicate", "thickness_mm", "impedance_K_mm2_per_W")
+
+
+def _table3_path() -> Path:
+    from surrogate import paper_data
+
+    return Path(paper_data.__file__).resolve().parent / "data" / "measured_tc.csv"
+
+
+#: The paper's Table 3, shipped with the package.
+TABLE3 = "paper Table 3"
+
+
+@dataclass(frozen=True)
+class Measurements:
+    """Replicate conductivities per formulation, W/(m K).
+
+    Attributes
+    ----------
+    values : dict of str to ndarray
+        Replicate values per formulation, in file order.
+    source : str
+        Where they came from.
+    """
+
+    values: dict[str, np.ndarray]
+    source: str
+
+    @property
+    def formulations(self) -> list[str]:
+        return list(self.values)
+
+    def mean(self, formulation: str) -> float:
+        """Replicate mean, W/(m K)."""
+        return float(self._get(formulation).mean())
+
+    def variance(self, formulation: str) -> float:
+        """Replicate (sample, ddof=1) variance, (W/(m K))^2."""
+        return float(self._get(formulation).var(ddof=1))
+
+    def standard_error(self, formulation: str) -> float:
+        """Standard error of the mean, W/(m K)."""
+        v = self._get(formulation)
+        return float(v.std(ddof=1) / math.sqrt(v.size))
+
+    def _get(self, formulation: str) -> np.ndarray:
+        if formulation not in self.values:
+            raise ValueError(f"formulation: {formulation!r} is not measured (measured: "
+                             f"{self.formulations})")
+        return self.values[formulation]
+
+    def without(self, formulation: str) -> "Measurements":
+        """The same table without one formulation (leave-one-out)."""
+        self._get(formulation)
+        return Measurements({k: v for k, v in self.values.items() if k != formulation},
+                            f"{self.source} without {formulation}")
+
+
+def _rows(path: Path, columns: tuple[str, ...]) -> list[tuple[int, dict[str, str]]]:
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise ValueError(f"path: {str(path)!r} does not exist") from None
+    except UnicodeDecodeError:
+        raise ValueError(f"path: {str(path)!r} is not a UTF-8 text file") from None
+    reader = csv.DictReader(text.splitlines())
+    header = [h.strip() for h in (reader.fieldnames or [])]
+    missing = [c for c in columns if c not in header]
+    if missing:
+        raise ValueError(f"{path.name}: missing column {missing[0]!r} (expected "
+                         f"{', '.join(columns)}; found {', '.join(header) or 'nothing'})")
+    out = []
+    for i, row in enumerate(reader, start=2):
+        row = {k.strip(): (v or "").strip() for k, v in row.items() if k is not None}
+        if not any(row.values()):
+            continue
+        out.append((i, row))
+    if not out:
+        raise ValueError(f"{path.name}: no data rows")
+    return out
+
+
+def _number(path: Path, line: int, row: dict, column: str, *, positive: bool = True) -> float:
+    text = row.get(column, "")
+    try:
+        v = float(text)
+    except ValueError:
+        raise ValueError(f"{path.name} line {line}: {column} is not a number: {text!r}") from None
+    if not math.isfinite(v) or (positive and v <= 0):
+        raise ValueError(f"{path.name} line {line}: {column} must be finite and > 0, got {text}")
+    return v
+
+
+def _check_formulation(path: Path, line: int, name: str, known: set[str] | None) -> None:
+    if not name:
+        raise ValueError(f"{path.name} line {line}: empty formulation")
+    if known is not None and name not in known:
+        raise ValueError(f"{path.name} line {line}: unknown formulation {name!r} (known: "
+                         f"{', '.join(sorted(known))})")
+
+
+def _known_formulations() -> set[str]:
+    from surrogate import paper_data
+
+    return set(paper_data.formulations())
+
+
+def _finish(path: Path, values: dict[str, list[float]], source: str) -> Measurements:
+    for name, v in values.items():
+        if len(v) < 2:
+            raise ValueError(f"{path.name}: formulation {name!r} has {len(v)} replicate; at "
+                             "least 2 are needed for its variance")
+    return Measurements({k: np.array(v) for k, v in values.items()}, source)
+
+
+def read_measurements(path: str | Path | None = None, *,
+                      formulations: set[str] | None = None) -> Measurements:
+    """A measurement table (default: the paper's Table 3, shipped).
+
+    Parameters
+    ----------
+    path : str or Path, optional
+        CSV with columns ``formulation,replicate,k_W_per_mK``.
+    formulations : set of str, optional
+        Names the table may use (default: the paper's Table 2 formulations).
+
+    Raises
+    ------
+    ValueError
+        Naming file, line and column: missing column, non-numeric, NaN, zero or negative k,
+        unknown formulation, a replicate given twice, fewer than 2 replicates.
+    """
+    p = _table3_path() if path is None else Path(path)
+    known = _known_formulations() if formulations is None else set(formulations)
+    values: dict[str, list[float]] = {}
+    seen: set[tuple[str, str]] = set()
+    for line, row in _rows(p, TABLE_COLUMNS):
+        name = row["formulation"]
+        _check_formulation(p, line, name, known)
+        rep = row["replicate"]
+        if (name, rep) in seen:
+            raise ValueError(f"{p.name} line {line}: replicate {rep!r} of {name!r} given twice")
+        seen.add((name, rep))
+        values.setdefault(name, []).append(_number(p, line, row, "k_W_per_mK"))
+    return _finish(p, values, TABLE3 if path is None else str(p))
+
+
+def conductivity_from_impedance(thickness_m: np.ndarray,
+                                impedance_m2K_per_W: np.ndarray) -> tuple[float, float]:
+    """``K = 1 / a`` from ``I = a t + b`` (Eqs. 8-10) and its standard error.
+
+    Parameters
+    ----------
+    thickness_m : array
+        Sample thicknesses t, m, strictly increasing, at least 2.
+    impedance_m2K_per_W : array
+        Thermal impedances I = A dT / Q at those thicknesses, m^2 K/W.
+
+    Returns
+    -------
+    K : float
+        Conductivity, W/(m K).
+    sigma_K : float
+        Its standard error from the slope's (``sigma_a / a^2``), W/(m K); NaN with 2 points.
+    """
+    t = np.asarray(thickness_m, dtype=np.float64)
+    imp = np.asarray(impedance_m2K_per_W, dtype=np.float64)
+    if t.ndim != 1 or t.size < 2 or imp.shape != t.shape:
+        raise ValueError("thickness_m, impedance_m2K_per_W: expected two 1-D arrays of the "
+                         "same length >= 2")
+    if not (np.all(np.isfinite(t)) and np.all(np.isfinite(imp))):
+        raise ValueError("thickness_m, impedance_m2K_per_W: NaN or inf")
+    if np.any(np.diff(t) <= 0):
+        raise ValueError("thickness_m: thicknesses must increase")
+    A = np.column_stack([t, np.ones_like(t)])
+    (a, b), *_ = np.linalg.lstsq(A, imp, rcond=None)
+    if a <= 0:
+        raise ValueError(f"impedance_m2K_per_W: the impedance does not grow with thickness "
+                         f"(slope {a:.3g} m K/W); K = 1/a needs a positive slope")
+    if t.size == 2:
+        return float(1.0 / a), math.nan
+    resid = imp - A @ np.array([a, b])
+    s2 = float(resid @ resid) / (t.size - 2)
+    var_a = s2 / float(np.sum((t - t.mean()) ** 2))
+    return float(1.0 / a), float(math.sqrt(var_a) / a ** 2)
+
+
+def read_tester_readings(path: str | Path, *,
+                         formulations: set[str] | None = None) -> Measurements:
+    """Tester readings (impedance vs thickness per sample) reduced to one K per replicate.
+
+    Columns ``formulation,replicate,thickness_mm,impedance_K_mm2_per_W``; the rows of one
+    (formulation, replicate) are one sample, in increasing thickness.
+    """
+    p = Path(path)
+    known = _known_formulations() if formulations is None else set(formulations)
+    samples: dict[tuple[str, str], list[tuple[int, float, float]]] = {}
+    for line, row in _rows(p, READING_COLUMNS):
+        name = row["formulation"]
+        _check_formulation(p, line, name, known)
+        t = _number(p, line, row, "thickness_mm") * 1e-3
+        imp = _number(p, line, row, "impedance_K_mm2_per_W") * 1e-6
+        samples.setdefault((name, row["replicate"]), []).append((line, t, imp))
+    values: dict[str, list[float]] = {}
+    for (name, rep), pts in samples.items():
+        ts = np.array([q[1] for q in pts])
+        if ts.size < 2:
+            raise ValueError(f"{p.name} line {pts[0][0]}: sample {name!r} replicate {rep!r} "
+                             "has one thickness; Eq. 8 needs at least 2")
+        if np.any(np.diff(ts) <= 0):
+            bad = pts[int(np.flatnonzero(np.diff(ts) <= 0)[0]) + 1][0]
+            raise ValueError(f"{p.name} line {bad}: thicknesses of {name!r} replicate {rep!r} "
+                             "do not increase")
+        try:
+            k, _ = conductivity_from_impedance(ts, np.array([q[2] for q in pts]))
+        except ValueError as exc:
+            raise ValueError(f"{p.name} line {pts[0][0]}: {name!r} replicate {rep!r}: "
+                             f"{exc}") from None
+        values.setdefault(name, []).append(k)
+    return _finish(p, values, str(p))
