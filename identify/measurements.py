@@ -30,12 +30,6 @@ TABLE_COLUMNS = ("formulation", "replicate", "k_W_per_mK")
 READING_COLUMNS = ("formulation", "replicate", "thickness_mm", "impedance_K_mm2_per_W")
 
 
-def _table3_path() -> Path:
-    from surrogate import paper_data
-
-    return Path(paper_data.__file__).resolve().parent / "data" / "measured_tc.csv"
-
-
 #: The paper's Table 3, shipped with the package.
 TABLE3 = "paper Table 3"
 
@@ -85,13 +79,17 @@ class Measurements:
                             f"{self.source} without {formulation}")
 
 
-def _rows(path: Path, columns: tuple[str, ...]) -> list[tuple[int, dict[str, str]]]:
+def _read_text(path: Path) -> str:
     try:
-        text = path.read_text(encoding="utf-8")
+        return path.read_text(encoding="utf-8")
     except FileNotFoundError:
         raise ValueError(f"path: {str(path)!r} does not exist") from None
     except UnicodeDecodeError:
         raise ValueError(f"path: {str(path)!r} is not a UTF-8 text file") from None
+
+
+def _rows(path: Path, text: str, columns: tuple[str, ...]) -> list[tuple[int, dict[str, str]]]:
+    """Data rows of the CSV ``text`` (``path`` names it in errors) with their line numbers."""
     reader = csv.DictReader(text.splitlines())
     header = [h.strip() for h in (reader.fieldnames or [])]
     missing = [c for c in columns if c not in header]
@@ -159,11 +157,17 @@ def read_measurements(path: str | Path | None = None, *,
         Naming file, line and column: missing column, non-numeric, NaN, zero or negative k,
         unknown formulation, a replicate given twice, fewer than 2 replicates.
     """
-    p = _table3_path() if path is None else Path(path)
+    if path is None:
+        from surrogate import paper_data
+
+        p, text = Path("measured_tc.csv"), paper_data.table_text("measured_tc")
+    else:
+        p = Path(path)
+        text = _read_text(p)
     known = _known_formulations() if formulations is None else set(formulations)
     values: dict[str, list[float]] = {}
     seen: set[tuple[str, str]] = set()
-    for line, row in _rows(p, TABLE_COLUMNS):
+    for line, row in _rows(p, text, TABLE_COLUMNS):
         name = row["formulation"]
         _check_formulation(p, line, name, known)
         rep = row["replicate"]
@@ -224,7 +228,7 @@ def read_tester_readings(path: str | Path, *,
     p = Path(path)
     known = _known_formulations() if formulations is None else set(formulations)
     samples: dict[tuple[str, str], list[tuple[int, float, float]]] = {}
-    for line, row in _rows(p, READING_COLUMNS):
+    for line, row in _rows(p, _read_text(p), READING_COLUMNS):
         name = row["formulation"]
         _check_formulation(p, line, name, known)
         t = _number(p, line, row, "thickness_mm") * 1e-3

@@ -41,11 +41,10 @@ def _formulation_rows(store, name: str | None):
     return name, table.filter(mask)
 
 
-def _varied(store, table) -> list[str]:
+def _varied(camp, table) -> list[str]:
     """The campaign's parameters (flat names) that take more than one value in ``table``."""
     from .cli import CLIError
 
-    camp = store.campaign()
     known = set(camp.base)
     for f in camp.formulations:
         for s in camp.parameter_sets(f):
@@ -80,7 +79,8 @@ def _fit(args: argparse.Namespace) -> int:
         name, table = _formulation_rows(store, args.formulation)
     except CampaignError as exc:  # no finished rows yet
         raise CLIError(f"DIR: {exc}", 2) from None
-    features = _varied(store, table)
+    camp = store.campaign()
+    features = _varied(camp, table)
     if args.model == "prototype":
         from surrogate.prototype import PrototypeRegressor
 
@@ -97,7 +97,6 @@ def _fit(args: argparse.Namespace) -> int:
     from surrogate.reduced_basis import ReducedBasis
     from surrogate.runner import build_rve
 
-    camp = store.campaign()
     replicas = sorted(set(table.column("replica").to_pylist()))
     if args.replica not in replicas:
         raise CLIError(f"--replica: {args.replica} is not solved in the campaign (it holds "

@@ -30,7 +30,8 @@ from itr_fv.materials import Materials
 from itr_fv.model import FaceGeometry
 from itr_fv.parameters import is_log_scaled, parse_parameter
 
-__all__ = ["ParameterBox", "ResistanceDecomposition", "ConductanceInterpolation"]
+__all__ = ["ParameterBox", "ResistanceDecomposition", "ConductanceInterpolation",
+           "interpolation_coefficients"]
 
 #: A decomposition that does not reproduce the model to this relative error is refused.
 AFFINE_CHECK_RTOL = 1e-9
@@ -85,6 +86,10 @@ class ParameterBox:
     def to_rho(self, values: np.ndarray) -> np.ndarray:
         """``rho`` (1/k or R) of parameter values, shape (n, P)."""
         return np.where(self.is_conductivity, 1.0 / values, values)
+
+    def from_rho(self, rho: np.ndarray) -> np.ndarray:
+        """Parameter values of ``rho`` (the inverse of :meth:`to_rho`)."""
+        return np.where(self.is_conductivity, 1.0 / rho, rho)
 
     def sample(self, n: int, seed: int) -> np.ndarray:
         """``n`` parameter sets (n, P): a Latin hypercube, log-uniform for resistances,
@@ -206,7 +211,6 @@ class ConductanceInterpolation:
 
     def __init__(self, c: np.ndarray, a: np.ndarray, rho_train: np.ndarray,
                  rho_check: np.ndarray, *, tol: float, max_terms: int) -> None:
-        self.c_magic = np.zeros(0)
         exact = 1.0 / (c[:, None] + a @ rho_train.T)  # (F_na, n)
         res = exact.copy()
         rel = np.empty_like(res)
@@ -242,8 +246,7 @@ class ConductanceInterpolation:
 
     def coefficients(self, rho: np.ndarray) -> np.ndarray:
         """theta (n, Q) for rho (n, P)."""
-        g_magic = 1.0 / (self.c_magic[None, :] + rho @ self.a_magic.T)
-        return g_magic @ self.b_inv.T
+        return interpolation_coefficients(self.c_magic, self.a_magic, self.b_inv, rho)
 
     def _error(self, c: np.ndarray, a: np.ndarray, rho: np.ndarray, chunk: int = 32) -> float:
         worst = 0.0
@@ -253,3 +256,11 @@ class ConductanceInterpolation:
             approx = self.basis @ self.coefficients(part).T
             worst = max(worst, float(np.max(np.abs(approx - exact) / exact)))
         return worst
+
+
+def interpolation_coefficients(c_magic: np.ndarray, a_magic: np.ndarray, b_inv: np.ndarray,
+                               rho: np.ndarray) -> np.ndarray:
+    """theta (n, Q) of the conductance interpolation: the exact conductances at the magic
+    faces (``c_magic``, ``a_magic``: their decomposition) times ``b_inv^T``."""
+    g_magic = 1.0 / (c_magic[None, :] + rho @ a_magic.T)
+    return g_magic @ b_inv.T

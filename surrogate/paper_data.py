@@ -10,7 +10,7 @@ from __future__ import annotations
 import csv
 from importlib import resources
 
-__all__ = ["read_table", "formulations", "psd_lognormal", "paper_resistances",
+__all__ = ["read_table", "table_text", "formulations", "psd_lognormal", "paper_resistances",
            "PAPER_CONDUCTIVITY", "paper_parameters",
            "paper_validation", "measured_conductivities"]
 
@@ -18,12 +18,16 @@ TABLES = ("formulations", "measured_tc", "paper_itr", "paper_validation", "param
           "psd_lognormal")
 
 
-def read_table(name: str) -> list[dict[str, str]]:
-    """Rows of the shipped table ``name`` (one of :data:`TABLES`) as dictionaries of strings."""
+def table_text(name: str) -> str:
+    """The CSV text of the shipped table ``name`` (one of :data:`TABLES`)."""
     if name not in TABLES:
         raise ValueError(f"name: expected one of {TABLES}, got {name!r}")
-    text = resources.files("surrogate").joinpath("data", f"{name}.csv").read_text()
-    return list(csv.DictReader(text.splitlines()))
+    return resources.files("surrogate").joinpath("data", f"{name}.csv").read_text()
+
+
+def read_table(name: str) -> list[dict[str, str]]:
+    """Rows of the shipped table ``name`` (one of :data:`TABLES`) as dictionaries of strings."""
+    return list(csv.DictReader(table_text(name).splitlines()))
 
 
 def formulations() -> dict[str, dict[str, float]]:

@@ -48,7 +48,12 @@ from itr_fv.microstructure import Microstructure
 from itr_fv.model import apply_operator
 from itr_fv.problem import DiscreteProblem
 
-from .face_decomposition import ConductanceInterpolation, ParameterBox, ResistanceDecomposition
+from .face_decomposition import (
+    ConductanceInterpolation,
+    ParameterBox,
+    ResistanceDecomposition,
+    interpolation_coefficients,
+)
 from .reduced_kernels import galerkin_tensors
 
 __all__ = ["ReducedBasis", "ReducedBasisWarning"]
@@ -268,7 +273,7 @@ class ReducedBasis:
             if gap <= self.tol:
                 converged = True
                 break
-            mu_values = self._values_of_rho(rho_train[int(np.argmax(worst))])
+            mu_values = box.from_rho(rho_train[int(np.argmax(worst))])
         if bar is not None:
             bar.close()
         if not converged:
@@ -330,9 +335,6 @@ class ReducedBasis:
         order = np.array(order)
         self._gram_blocked = np.ascontiguousarray(self.gram_[:, order][:, :, order])
 
-    def _values_of_rho(self, rho: np.ndarray) -> np.ndarray:
-        return np.where(self.box_.is_conductivity, 1.0 / rho, rho)
-
     # ----------------------------------------------------------- evaluation
     def _check_fitted(self) -> None:
         if not hasattr(self, "gram_"):
@@ -390,8 +392,8 @@ class ReducedBasis:
         n = rho.shape[0]
         parts = [np.ones((n, 1)), 1.0 / rho[:, self.pure_params_]]
         if self.eim_b_inv_.size:
-            g_magic = 1.0 / (self.eim_c_[None, :] + rho @ self.eim_a_.T)
-            parts.append(g_magic @ self.eim_b_inv_.T)
+            parts.append(interpolation_coefficients(self.eim_c_, self.eim_a_, self.eim_b_inv_,
+                                                    rho))
         return np.hstack(parts)
 
     def _galerkin(self, rho: np.ndarray) -> np.ndarray:
@@ -563,7 +565,8 @@ class _Builder:
         self.fluxes: list[list[np.ndarray]] = [[], [], []]
         self.dual_gram = [np.zeros((1 + dec.a.shape[1], 0, 0)) for _ in range(3)]
         self.dual_mean = [np.zeros(0) for _ in range(3)]
-        self.g_ref: np.ndarray | None = None
+        self.g_ref: np.ndarray | None = None  # conductances of the first snapshot
+        self.r_ref: np.ndarray | None = None  # their inverse, flattened
 
     def _load(self, i: int) -> np.ndarray:
         z = np.zeros(3 * self.N)
@@ -599,6 +602,7 @@ class _Builder:
         conductances g (3, n1, n2, n3))."""
         if self.g_ref is None:
             self.g_ref = g
+            self.r_ref = 1.0 / g.ravel()
         for i in range(3):
             v = self._orthonormal(thetas[i], i)
             if v is not None:
@@ -628,14 +632,14 @@ class _Builder:
     def _add_flux(self, q: np.ndarray, direction: int) -> None:
         """Append a divergence-free flux of load case ``direction`` to its dual basis
         (orthonormalised in the resistance-weighted inner product of the first snapshot)."""
-        r_ref = 1.0 / self.g_ref
+        r_ref = self.r_ref
         q = q.ravel()
         own = self.fluxes[direction]
-        norm0 = math.sqrt(float(np.sum(r_ref.ravel() * q * q)))
+        norm0 = math.sqrt(float(np.sum(r_ref * q * q)))
         for _ in range(2):
             for f in own:
-                q = q - float(np.sum(r_ref.ravel() * f * q)) * f
-        norm = math.sqrt(float(np.sum(r_ref.ravel() * q * q)))
+                q = q - float(np.sum(r_ref * f * q)) * f
+        norm = math.sqrt(float(np.sum(r_ref * q * q)))
         if norm <= 1e-10 * norm0:
             return
         q = q / norm
