@@ -168,6 +168,8 @@ def build_parser() -> argparse.ArgumentParser:
     add_campaign_parser(sub, _Parser, _number)
     from .surrogate_cli import add_surrogate_parser
     add_surrogate_parser(sub, _Parser, _number)
+    from .identify_cli import add_identify_parsers
+    add_identify_parsers(sub, _Parser, _number)
     return parser
 
 

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import csv
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -118,10 +119,15 @@ def _number(path: Path, line: int, row: dict, column: str, *, positive: bool = T
     return v
 
 
-def _check_formulation(path: Path, line: int, name: str, known: set[str] | None) -> None:
+def _check_formulation(path: Path, line: int, name: str, known) -> None:
     if not name:
         raise ValueError(f"{path.name} line {line}: empty formulation")
-    if known is not None and name not in known:
+    if callable(known):
+        try:
+            known(name)
+        except ValueError as exc:
+            raise ValueError(f"{path.name} line {line}: unknown formulation: {exc}") from None
+    elif known is not None and name not in known:
         raise ValueError(f"{path.name} line {line}: unknown formulation {name!r} (known: "
                          f"{', '.join(sorted(known))})")
 
@@ -141,15 +147,18 @@ def _finish(path: Path, values: dict[str, list[float]], source: str) -> Measurem
 
 
 def read_measurements(path: str | Path | None = None, *,
-                      formulations: set[str] | None = None) -> Measurements:
+                      formulations: set[str] | Callable[[str], object] | None = None
+                      ) -> Measurements:
     """A measurement table (default: the paper's Table 3, shipped).
 
     Parameters
     ----------
     path : str or Path, optional
         CSV with columns ``formulation,replicate,k_W_per_mK``.
-    formulations : set of str, optional
-        Names the table may use (default: the paper's Table 2 formulations).
+    formulations : set of str or callable, optional
+        Names the table may use (default: the paper's Table 2 formulations), or a function
+        that raises ValueError for a name it does not accept (e.g.
+        :func:`identify.pipeline.fractions_of`).
 
     Raises
     ------
@@ -164,7 +173,8 @@ def read_measurements(path: str | Path | None = None, *,
     else:
         p = Path(path)
         text = _read_text(p)
-    known = _known_formulations() if formulations is None else set(formulations)
+    known = _known_formulations() if formulations is None else (
+        formulations if callable(formulations) else set(formulations))
     values: dict[str, list[float]] = {}
     seen: set[tuple[str, str]] = set()
     for line, row in _rows(p, text, TABLE_COLUMNS):
@@ -219,14 +229,16 @@ def conductivity_from_impedance(thickness_m: np.ndarray,
 
 
 def read_tester_readings(path: str | Path, *,
-                         formulations: set[str] | None = None) -> Measurements:
+                         formulations: set[str] | Callable[[str], object] | None = None
+                         ) -> Measurements:
     """Tester readings (impedance vs thickness per sample) reduced to one K per replicate.
 
     Columns ``formulation,replicate,thickness_mm,impedance_K_mm2_per_W``; the rows of one
     (formulation, replicate) are one sample, in increasing thickness.
     """
     p = Path(path)
-    known = _known_formulations() if formulations is None else set(formulations)
+    known = _known_formulations() if formulations is None else (
+        formulations if callable(formulations) else set(formulations))
     samples: dict[tuple[str, str], list[tuple[int, float, float]]] = {}
     for line, row in _rows(p, _read_text(p), READING_COLUMNS):
         name = row["formulation"]

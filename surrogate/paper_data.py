@@ -12,7 +12,7 @@ from importlib import resources
 
 __all__ = ["read_table", "table_text", "formulations", "psd_lognormal", "paper_resistances",
            "PAPER_CONDUCTIVITY", "paper_parameters",
-           "paper_validation", "measured_conductivities"]
+           "paper_validation"]
 
 TABLES = ("formulations", "measured_tc", "paper_itr", "paper_validation", "parameter_grid",
           "psd_lognormal")
@@ -75,11 +75,3 @@ def paper_validation() -> dict[str, tuple[float, float]]:
     """Table 6: formulation -> (measured, predicted) conductivity, W/(m K)."""
     return {r["formulation"]: (float(r["measured_W_per_mK"]), float(r["predicted_W_per_mK"]))
             for r in read_table("paper_validation")}
-
-
-def measured_conductivities() -> dict[str, list[float]]:
-    """Table 3: formulation -> the replicate conductivities, W/(m K)."""
-    out: dict[str, list[float]] = {}
-    for r in read_table("measured_tc"):
-        out.setdefault(r["formulation"], []).append(float(r["k_W_per_mK"]))
-    return out

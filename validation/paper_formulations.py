@@ -92,9 +92,10 @@ def solve(name: str, fractions: dict, seed: int, voxel_um: float) -> dict:
 
 
 def report(rows: list[dict], voxel_um: float, out: Path) -> None:
+    from identify.measurements import read_measurements
     from surrogate import paper_data
 
-    measured = paper_data.measured_conductivities()
+    table3 = read_measurements()
     table6 = paper_data.paper_validation()
     forms = paper_data.formulations()
     lines = ["# The paper's formulations under the gap contact model", "",
@@ -111,7 +112,7 @@ def report(rows: list[dict], voxel_um: float, out: Path) -> None:
             continue
         ks = [float(r["k_iso"]) for r in mine]
         mean = statistics.fmean(ks)
-        meas = statistics.fmean(measured[name])
+        meas = table3.mean(name)
         pred = table6[name][1]
         errs[name] = 100 * (mean / meas - 1)
         paper_errs[name] = 100 * (pred / meas - 1)

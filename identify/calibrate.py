@@ -1,0 +1,282 @@
+"""Bayesian calibration of interface resistances on reduced-basis forward models.
+
+The likelihood of one formulation's measured mean ``m`` given parameters ``theta`` is
+Gaussian with the variance
+
+    v(theta) = s^2 / n  +  (sigma_rve k(theta))^2  +  e(theta)^2,
+
+``s^2 / n`` the replicate variance of the mean (:mod:`identify.measurements`) (plus
+``(sigma_c k)^2`` in a later stage: the spread of its k_iso over the earlier stages'
+posterior, see :mod:`identify.pipeline`), ``sigma_rve`` the relative RVE-to-RVE scatter of
+the k_iso of one RVE (:attr:`identify.forward.ForwardModel.rve_scatter`, pooled over a
+filler system), ``k`` the forward model's k_iso (the first replica's reduced basis scaled to
+the replica mean) and ``e`` its certified error bound. The RVE term is an upper bound of that
+part of the error: the replica mean misses the ensemble mean by ``sigma_rve / sqrt(R)``.
+The prior is log-uniform over the reduced-basis box.
+
+The posterior is evaluated on a dense grid in log10 R (no sampler to tune or converge), stage
+by stage as the paper's hierarchy: first each single-filler system (its ``R_<f>_silicone``
+and, under the area parametrisation, ``Rff_<f>_<f>``), then each two-filler system for its
+new parameter with the earlier stages' posterior samples carried along (a *cut* posterior:
+the hybrids do not feed back into the single-filler parameters). A stage may add at most
+two parameters.
+
+Per parameter the result holds the best value (the grid point of highest posterior), the
+posterior median and 90 % credible interval; per stage the correlation of log10 values and
+an identifiability statement: the principal directions of the posterior covariance whose
+spread is more than half the prior's are combinations the data do not separate.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .forward import ForwardModel
+from .measurements import Measurements
+
+__all__ = ["Stage", "Posterior", "stages_of", "calibrate", "pooled_scatter", "variance",
+           "UNIDENTIFIED_RATIO"]
+
+#: A principal direction whose posterior spread exceeds this fraction of the prior's is
+#: reported as not determined by the data.
+UNIDENTIFIED_RATIO = 0.5
+
+
+@dataclass(frozen=True)
+class Stage:
+    """One step of the hierarchy: formulations of one filler system and the parameters
+    they identify (the others come from earlier stages)."""
+
+    system: tuple[str, ...]
+    formulations: tuple[str, ...]
+    new: tuple[str, ...]
+    carried: tuple[str, ...]
+
+
+def stages_of(models: Mapping[str, ForwardModel]) -> list[Stage]:
+    """The hierarchy for a set of forward models: single-filler systems first, then
+    systems of two fillers. ValueError if a stage would add more than two parameters."""
+    systems: dict[tuple[str, ...], list[str]] = {}
+    for name, m in models.items():
+        systems.setdefault(tuple(sorted(m.fractions)), []).append(name)
+    out, known = [], []
+    for system in sorted(systems, key=lambda s: (len(s), s)):
+        forms = tuple(systems[system])
+        params = models[forms[0]].parameters
+        new = tuple(p for p in params if p not in known)
+        carried = tuple(p for p in params if p in known)
+        if len(new) > 2:
+            raise ValueError(f"measurements: the system {'+'.join(system)} would identify "
+                             f"{len(new)} parameters at once ({', '.join(new)}); measure its "
+                             "single-filler formulations too")
+        out.append(Stage(system, forms, new, carried))
+        known += list(new)
+    return out
+
+
+def pooled_scatter(models: Sequence[ForwardModel]) -> float:
+    """Root-mean-square relative RVE scatter of k_iso over a filler system's formulations."""
+    return float(math.sqrt(np.mean([m.rve_scatter ** 2 for m in models])))
+
+
+@dataclass
+class Posterior:
+    """Calibrated parameters (flat names, m^2 K/W).
+
+    Attributes
+    ----------
+    names : list of str
+    samples : ndarray (S, P)
+        Posterior samples of log10 values.
+    best : dict
+        Highest-posterior values found on the grid.
+    stages : list of dict
+        Per stage: system, formulations, parameters, grid, marginal density,
+        correlation, identifiability, log-likelihood at the best point.
+    prior : (float, float)
+        The log-uniform prior's range, m^2 K/W.
+    """
+
+    names: list[str]
+    samples: np.ndarray
+    best: dict[str, float]
+    prior: tuple[float, float]
+    stages: list[dict] = field(default_factory=list)
+
+    def median(self, name: str) -> float:
+        return float(10 ** np.median(self.samples[:, self.names.index(name)]))
+
+    def interval(self, name: str, level: float = 0.9) -> tuple[float, float]:
+        """Equal-tailed credible interval, m^2 K/W."""
+        x = self.samples[:, self.names.index(name)]
+        a = (1 - level) / 2
+        lo, hi = np.quantile(x, [a, 1 - a])
+        return float(10 ** lo), float(10 ** hi)
+
+    def correlation(self) -> np.ndarray:
+        """Correlation matrix of the log10 samples (P, P)."""
+        if self.samples.shape[1] == 1:
+            return np.ones((1, 1))
+        return np.corrcoef(self.samples, rowvar=False)
+
+    def log_likelihood_best(self) -> float:
+        return float(sum(s["log_likelihood_best"] for s in self.stages))
+
+    def to_dict(self) -> dict:
+        params = {}
+        for n in self.names:
+            lo, hi = self.interval(n)
+            params[n] = {"best": self.best[n], "median": self.median(n), "interval_90": [lo, hi],
+                         "unit": "m^2 K/W"}
+        return {"parameters": params,
+                "correlation_log10": {"names": self.names,
+                                      "matrix": np.round(self.correlation(), 4).tolist()},
+                "identifiability": [s["identifiability"] for s in self.stages],
+                "prior_m2K_per_W": list(self.prior),
+                "log_likelihood_best": self.log_likelihood_best()}
+
+
+def _grid(prior: tuple[float, float], n: int) -> np.ndarray:
+    return np.linspace(math.log10(prior[0]), math.log10(prior[1]), n)
+
+
+def _stage_loglike(models: Mapping[str, ForwardModel], stage: Stage, meas: Measurements,
+                   columns: dict[str, np.ndarray], scatter: float) -> np.ndarray:
+    total = 0.0
+    for f in stage.formulations:
+        k, err = models[f].predict(columns)
+        v = variance(meas.standard_error(f), k, err, scatter, models[f].carried_scatter)
+        total = total - 0.5 * (meas.mean(f) - k) ** 2 / v - 0.5 * np.log(2 * math.pi * v)
+    return total
+
+
+def variance(standard_error: float, k: np.ndarray, err: np.ndarray, scatter: float,
+             carried: float = 0.0) -> np.ndarray:
+    """Likelihood variance, (W/(m K))^2: replicate variance of the mean, RVE scatter,
+    earlier stages' spread (relative ``carried``) and the surrogate's error bound."""
+    return standard_error ** 2 + ((scatter * k) ** 2 + (carried * k) ** 2) + err ** 2
+
+
+def _identifiability(names: Sequence[str], log_samples: np.ndarray,
+                     prior: tuple[float, float]) -> dict:
+    prior_sd = (math.log10(prior[1]) - math.log10(prior[0])) / math.sqrt(12)
+    cov = np.atleast_2d(np.cov(log_samples, rowvar=False))
+    w, V = np.linalg.eigh(cov)
+    directions = []
+    for j in range(len(w) - 1, -1, -1):
+        ratio = math.sqrt(max(w[j], 0.0)) / prior_sd
+        v = V[:, j] / V[np.argmax(np.abs(V[:, j])), j]
+        combo = " ".join(f"{c:+.2f} log10({n})" for c, n in zip(v, names) if abs(c) > 0.05)
+        directions.append({"combination": combo, "posterior_to_prior_sd": ratio,
+                           "determined": ratio <= UNIDENTIFIED_RATIO})
+    bad = [d["combination"] for d in directions if not d["determined"]]
+    if bad:
+        text = ("the data do not separate: " + "; ".join(bad) +
+                f" (posterior spread > {UNIDENTIFIED_RATIO:g} of the prior's)")
+    else:
+        text = "every parameter and combination is determined by the data"
+    return {"directions": directions, "statement": text}
+
+
+def calibrate(models: Mapping[str, ForwardModel], measurements: Measurements, *,
+              grid_points: int = 121, carried_samples: int = 256, n_samples: int = 4000,
+              seed: int = 0) -> Posterior:
+    """Posterior of the interface parameters of ``models`` given ``measurements``.
+
+    Parameters
+    ----------
+    models : mapping of formulation to a built ForwardModel
+        Every formulation must be measured (two replicates at least).
+    measurements : Measurements
+    grid_points : int
+        Grid points per parameter and stage (log10 spacing over the prior).
+    carried_samples : int
+        Earlier-stage posterior samples crossed with a later stage's grid.
+    n_samples : int
+        Posterior samples kept (jittered uniformly inside their grid cell).
+    seed : int
+        Seed of the sampling.
+
+    Returns
+    -------
+    Posterior
+    """
+    if not models:
+        raise ValueError("models: expected at least one formulation")
+    for f in models:
+        if f not in measurements.values:
+            raise ValueError(f"measurements: formulation {f!r} has a forward model but no "
+                             f"measurement (measured: {measurements.formulations})")
+    if not isinstance(grid_points, int) or grid_points < 5:
+        raise ValueError(f"grid_points: expected a whole number >= 5, got {grid_points!r}")
+    rng = np.random.default_rng(seed)
+    prior = next(iter(models.values())).settings.prior_m2K_per_W
+    names: list[str] = []
+    samples = np.zeros((n_samples, 0))
+    best: dict[str, float] = {}
+    stages_out = []
+    for stage in stages_of(models):
+        scatter = pooled_scatter([models[f] for f in stage.formulations])
+        if not stage.new:
+            # nothing new to identify: these formulations only test the earlier stages
+            at_best = {p: np.array([best[p]]) for p in names}
+            stages_out.append({
+                "system": list(stage.system), "formulations": list(stage.formulations),
+                "parameters": [], "carried": list(stage.carried), "rve_scatter": scatter,
+                "log_likelihood_best": float(_stage_loglike(models, stage, measurements,
+                                                            at_best, scatter)[0]),
+                "identifiability": {"system": "+".join(stage.system), "directions": [],
+                                    "statement": "no parameter of its own: predicted from "
+                                                 "the earlier stages"}})
+            continue
+        axis = _grid(prior, grid_points)
+        step = axis[1] - axis[0]
+        mesh = np.meshgrid(*[axis] * len(stage.new), indexing="ij")
+        G = np.stack([m.ravel() for m in mesh], axis=1)              # (g, new)
+        if stage.carried:
+            pick = rng.choice(samples.shape[0], size=min(carried_samples, samples.shape[0]),
+                              replace=False)
+            prev = samples[pick]                                       # (s, known)
+        else:
+            prev = np.zeros((1, 0))
+        S, g = prev.shape[0], G.shape[0]
+        columns = {}
+        for j, p in enumerate(names if stage.carried else []):
+            columns[p] = np.repeat(10 ** prev[:, j], g)
+        for j, p in enumerate(stage.new):
+            columns[p] = np.tile(10 ** G[:, j], S)
+        ll = _stage_loglike(models, stage, measurements, columns, scatter).reshape(S, g)
+        w = np.exp(ll - ll.max())
+        pick = rng.choice(S * g, size=n_samples, p=(w / w.sum()).ravel())
+        si, gi = np.divmod(pick, g)
+        jitter = rng.uniform(-0.5, 0.5, size=(n_samples, len(stage.new))) * step
+        new_samples = np.clip(G[gi] + jitter, axis[0], axis[-1])
+        if stage.carried:
+            samples = np.hstack([prev[si], new_samples])
+            # the best point: earlier stages' best values, this stage's grid
+            line = {p: np.full(g, best[p]) for p in names}
+            line.update({p: 10 ** G[:, j] for j, p in enumerate(stage.new)})
+            ll_best = _stage_loglike(models, stage, measurements, line, scatter)
+        else:
+            # independent of the earlier stages: pair the rows as they come
+            samples = np.hstack([samples, new_samples])
+            ll_best = ll[0]
+        bg = int(np.argmax(ll_best))
+        for j, p in enumerate(stage.new):
+            best[p] = float(10 ** G[bg, j])
+        names += list(stage.new)
+        marg = w.sum(axis=0).reshape(mesh[0].shape)
+        stages_out.append({
+            "system": list(stage.system), "formulations": list(stage.formulations),
+            "parameters": list(stage.new), "carried": list(stage.carried),
+            "rve_scatter": scatter, "grid_log10": axis.tolist(),
+            "density": (marg / marg.sum()).tolist(),
+            "log_likelihood_best": float(ll_best[bg]),
+            "identifiability": {"system": "+".join(stage.system),
+                                **_identifiability(stage.new, new_samples, prior)},
+        })
+    return Posterior(names, samples, best, tuple(prior), stages_out)

@@ -1,0 +1,197 @@
+"""Identification of one measurement table under one parametrisation, stage by stage.
+
+:func:`identify` packs the RVEs and fits the reduced bases of the single-filler
+formulations over the whole prior box and calibrates them; then, as the paper's hierarchy,
+the two-filler formulations hold the single-filler parameters at their best values and
+their reduced bases vary only their own contact parameter (none under the gap
+parametrisation). The earlier stages' uncertainty enters a two-filler formulation's
+likelihood as the relative spread of its k_iso over :data:`CARRIED_DRAWS` posterior draws
+(full solves). Everything is then calibrated and screened. Formulation names give the
+composition: a Table 2 name, or ``<filler>-<vol%>`` and ``<filler>-<vol%>-<filler>-<vol%>``
+(e.g. ``Al2O3-62``).
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import time
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from surrogate import paper_data
+
+from .calibrate import Posterior, calibrate
+from .forward import PARAMETRISATIONS, ForwardModel, ForwardSettings
+from .measurements import Measurements
+from .screen import ScreenResult, hierarchical_screen
+
+__all__ = ["fractions_of", "Identification", "identify", "CARRIED_DRAWS"]
+
+#: Draws of the earlier stages' posterior whose spread a later stage's likelihood carries.
+CARRIED_DRAWS = 6
+_PART = re.compile(r"^(Al2O3|AlN)-(\d+(?:\.\d+)?)$")
+
+
+def fractions_of(name: str) -> dict[str, float]:
+    """Filler volume fractions (0-1) of a formulation name (Table 2 or ``<filler>-<vol%>``
+    pairs); ValueError naming the formulation otherwise."""
+    table2 = paper_data.formulations()
+    if name in table2:
+        return dict(table2[name])
+    parts = name.split("-")
+    out: dict[str, float] = {}
+    for i in range(0, len(parts) - 1, 2):
+        m = _PART.match(f"{parts[i]}-{parts[i + 1]}")
+        if m is None or m.group(1) in out:
+            break
+        out[m.group(1)] = float(m.group(2)) / 100
+    else:
+        if out and len(parts) % 2 == 0 and 0 < sum(out.values()) < 0.7:
+            return out
+    raise ValueError(f"formulation {name!r}: expected a Table 2 name or <filler>-<vol%> "
+                     "pairs of Al2O3 and AlN (e.g. Al2O3-62, Al2O3-30-AlN-30), below 70 vol% "
+                     "in all")
+
+
+@dataclass
+class Identification:
+    """Forward models, posterior and screening of one parametrisation."""
+
+    parametrisation: str
+    settings: ForwardSettings
+    models: dict[str, ForwardModel]
+    posterior: Posterior
+    screening: list[ScreenResult]
+    seconds: dict[str, float] = field(default_factory=dict)
+    measurements: Measurements | None = None
+
+    @property
+    def n_parameters(self) -> int:
+        return len(self.posterior.names)
+
+    def residuals(self) -> dict[str, tuple[float, float, float]]:
+        """Per formulation at the best values: (measured mean, model k_iso, likelihood
+        variance), W/(m K) and (W/(m K))^2."""
+        from .calibrate import pooled_scatter, stages_of, variance
+
+        out = {}
+        for stage in stages_of(self.models):
+            s = pooled_scatter([self.models[f] for f in stage.formulations])
+            for f in stage.formulations:
+                m = self.models[f]
+                k, err = m.predict({p: np.array([self.posterior.best[p]]) for p in m.parameters})
+                v = variance(self.measurements.standard_error(f), k, err, s, m.carried_scatter)
+                out[f] = (self.measurements.mean(f), float(k[0]), float(v[0]))
+        return out
+
+    def chi_square(self) -> float:
+        """Sum over formulations of (measured - model)^2 / variance at the best values."""
+        return float(sum((m - k) ** 2 / v for m, k, v in self.residuals().values()))
+
+    def bic(self) -> float:
+        """Bayesian information criterion: -2 ln L_best + P ln(n formulations)."""
+        return (-2 * self.posterior.log_likelihood_best()
+                + self.n_parameters * math.log(len(self.models)))
+
+
+
+def identify(measurements: Measurements, parametrisation: str = "gap", *,
+             settings: ForwardSettings | None = None, grid_points: int = 121, seed: int = 0,
+             reuse: Mapping[str, ForwardModel] | None = None, progress: bool = False,
+             echo: Callable[[str], None] = print) -> Identification:
+    """Calibrate and screen the interface parameters of one parametrisation.
+
+    Parameters
+    ----------
+    measurements : Measurements
+        One entry per formulation (two replicates at least); names give the composition.
+    parametrisation : {"gap", "area"}
+        See :mod:`identify.forward`.
+    settings : ForwardSettings, optional
+        RVE and surrogate settings (default ``ForwardSettings()``).
+    grid_points : int
+        Posterior grid points per parameter.
+    seed : int
+        Seed of the posterior sampling.
+    reuse : mapping of formulation to ForwardModel, optional
+        Built single-filler models of an earlier call with the same settings and
+        parametrisation (they do not depend on the measurements); the others are built.
+    progress : bool
+        Progress bars (reduced-basis full solves).
+    echo : callable
+        Where one-line progress messages go.
+    """
+    if parametrisation not in PARAMETRISATIONS:
+        raise ValueError(f"parametrisation: expected one of {sorted(PARAMETRISATIONS)}, got "
+                         f"{parametrisation!r}")
+    settings = settings or ForwardSettings()
+    par = PARAMETRISATIONS[parametrisation]
+    comps = {f: fractions_of(f) for f in measurements.formulations}
+    singles = [f for f in comps if len(comps[f]) == 1]
+    multis = [f for f in comps if len(comps[f]) > 1]
+    t0 = time.perf_counter()
+    models: dict[str, ForwardModel] = {}
+    for f in singles:
+        old = (reuse or {}).get(f)
+        if (old is not None and old.settings == settings and old.parametrisation == par
+                and not old.fixed):
+            models[f] = old
+        else:
+            models[f] = _build(f, comps[f], par, settings, None, progress, echo)
+    seconds = {"single-filler models": time.perf_counter() - t0}
+    post, screening = None, []
+    if singles:
+        t = time.perf_counter()
+        post = calibrate(models, measurements, grid_points=grid_points, seed=seed)
+        screening = hierarchical_screen(models, measurements)
+        seconds["single-filler calibration"] = time.perf_counter() - t
+    t = time.perf_counter()
+    for f in multis:
+        params = par.parameters(list(comps[f]))
+        fixed = {p: post.best[p] for p in params if post is not None and p in post.names}
+        models[f] = _build(f, comps[f], par, settings, fixed, progress, echo)
+        if fixed:
+            models[f].carried_scatter = _carried_scatter(models[f], post, seed)
+    seconds["two-filler models"] = time.perf_counter() - t
+    t = time.perf_counter()
+    post = calibrate(models, measurements, grid_points=grid_points, seed=seed)
+    screening = hierarchical_screen(models, measurements)
+    seconds["calibration and screening"] = time.perf_counter() - t
+    return Identification(parametrisation, settings, models, post, screening, seconds,
+                          measurements)
+
+
+def _carried_scatter(model: ForwardModel, posterior: Posterior, seed: int) -> float:
+    """Relative spread of a later-stage model's k_iso over :data:`CARRIED_DRAWS` draws of
+    the earlier stages' posterior (full solves of the first replica, own parameters at
+    the centre of their box)."""
+    from .forward import full_solve
+
+    rng = np.random.default_rng(seed)
+    rows = posterior.samples[rng.choice(posterior.samples.shape[0], CARRIED_DRAWS,
+                                        replace=False)]
+    ks = []
+    for row in rows:
+        values = {p: 10 ** row[posterior.names.index(p)] for p in model.fixed}
+        values.update(model.centre)
+        k = full_solve(model.microstructures[0], model.materials(values),
+                       model.settings.solver_tol)
+        model.solves.append({"purpose": "earlier-stage spread", "replica": 0, **values,
+                             "k_diagonal": k.tolist()})
+        ks.append(k.mean())
+    return float(np.std(ks, ddof=1) / np.mean(ks))
+
+
+def _build(name: str, fractions: dict[str, float], par, settings: ForwardSettings,
+           fixed: dict[str, float] | None, progress: bool,
+           echo: Callable[[str], None]) -> ForwardModel:
+    m = ForwardModel(name, fractions, par, settings, fixed=dict(fixed or {}))
+    m.build(progress=progress)
+    rb = (f"reduced basis {m.rb.n_solves_} full solves (gap {m.rb.training_gap_:.1e})"
+          if m.rb is not None else "no parameter of its own")
+    echo(f"  {par.name}: {name}: {m.microstructures[0].n_particles} particles, {rb}, RVE "
+         f"scatter {100 * m.rve_scatter:.1f} %, {m.build_seconds:.0f} s")
+    return m

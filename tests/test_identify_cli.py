@@ -1,0 +1,99 @@
+"""``itr identify`` and ``itr reproduce`` end to end at a tiny size, and their bad input."""
+
+import json
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+
+from identify.cli import main
+
+TINY = ["--box-um", "12", "--voxel-um", "0.5", "--replicas", "2", "--no-progress"]
+
+
+def write(path, text):
+    path.write_text(text)
+    return str(path)
+
+
+def test_identify_writes_identified_json(tmp_path, capsys):
+    csv = write(tmp_path / "m.csv", "formulation,replicate,k_W_per_mK\n"
+                "Al2O3-55,1,1.29\nAl2O3-55,2,1.30\nAl2O3-55,3,1.22\n"
+                "Al2O3-62,1,1.70\nAl2O3-62,2,1.75\nAl2O3-62,3,1.66\n")
+    out = tmp_path / "out"
+    assert main(["identify", csv, "--out", str(out), "--parametrisation", "gap", *TINY]) == 0
+    data = json.loads((out / "identified.json").read_text())
+    p = data["gap"]["parameters"]["R_Al2O3_silicone"]
+    lo, hi = p["interval_90"]
+    assert 1e-9 <= lo <= p["median"] <= hi <= 1e-5
+    assert p["unit"] == "m^2 K/W"
+    assert data["gap"]["formulations"] == 2
+    report = (out / "report.md").read_text()
+    assert "R_Al2O3_silicone" in report and "Al2O3-62" in report
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert {f["path"] for f in manifest["files"]} >= {"identified.json", "report.md"}
+    assert "identify: done" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("text, expected", [
+    ("formulation,replicate\nAl2O3-55,1\n", "k_W_per_mK"),
+    ("formulation,replicate,k_W_per_mK\nAl2O3-55,1,-1.2\nAl2O3-55,2,1.3\n", "line 2"),
+    ("formulation,replicate,k_W_per_mK\nSiC-50,1,1.2\nSiC-50,2,1.3\n", "unknown formulation"),
+    ("formulation,replicate,k_W_per_mK\nAl2O3-55,1,1.2\n", "replicate"),
+    ("formulation,replicate,k_W_per_mK\nAl2O3-55,1,nan\nAl2O3-55,2,1.3\n", "k_W_per_mK"),
+])
+def test_identify_bad_tables_fail_in_one_line(tmp_path, capsys, text, expected):
+    csv = write(tmp_path / "bad.csv", text)
+    assert main(["identify", csv, "--out", str(tmp_path / "o"), *TINY]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("itr: error: ") and err.count("\n") == 1
+    assert expected in err
+    assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("args, expected", [
+    (["identify", "missing.csv"], "MEASUREMENTS"),
+    (["reproduce", "--voxel-um", "0.3", "--box-um", "8"], "--box-um/--voxel-um"),
+    (["reproduce", "--replicas", "1"], "--replicas"),
+    (["reproduce", "--parametrisation", "spots"], "--parametrisation"),
+    (["reproduce", "--box-um", "-2"], "--box-um"),
+])
+def test_bad_invocations_fail_in_one_line(tmp_path, capsys, args, expected):
+    assert main([*args, "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("itr: error: ") and err.count("\n") == 1
+    assert expected in err
+
+
+def test_reproduce_end_to_end_at_tiny_size(tmp_path):
+    """Every stage of the pipeline on the shipped Table 3: RVEs of all 12 formulations,
+    reduced bases, calibration, screening, full-solver validation, leave-one-out, figures,
+    fields, Parquet and manifest."""
+    out = tmp_path / "rep"
+    assert main(["reproduce", "--out", str(out), *TINY]) == 0
+    data = json.loads((out / "identified.json").read_text())
+    for par in ("area", "gap"):
+        d = data[par]
+        assert len(d["validation"]) == 12 and len(d["leave_one_out"]) == 12
+        for row in d["validation"]:
+            assert row["predicted"] > 0.18                        # above the matrix
+            assert abs(row["error_pct"]) < 60
+        for name, p in d["parameters"].items():
+            assert p["interval_90"][0] <= p["best"] * 1.2 and p["unit"] == "m^2 K/W"
+    assert set(data["gap"]["parameters"]) == {"R_Al2O3_silicone", "R_AlN_silicone"}
+    assert "Rff_Al2O3_AlN" in data["area"]["parameters"]
+    assert data["selection"]["bic"].keys() == {"area", "gap"}
+    report = (out / "report.md").read_text()
+    for heading in ("Table 1", "Table 3", "Table 5", "Table 6", "Leave one formulation out",
+                    "Identifiability"):
+        assert heading in report
+    solves = pq.read_table(out / "full_solves.parquet").to_pydict()
+    assert set(solves["purpose"]) >= {"reduced basis", "RVE scatter", "validation"}
+    assert np.all(np.array(solves["k_xx"]) > 0.18)
+    names = {f["path"] for f in json.loads((out / "manifest.json").read_text())["files"]}
+    assert {"fig2_psd.png", "fig4_rves.png", "fig6_parity.png", "fig8_screening.png",
+            "report.md", "identified.json", "full_solves.parquet"} <= names
+    assert any(n.endswith(".vti") for n in names)
+    for n in names:
+        if n.endswith(".png"):
+            assert (out / n).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
