@@ -57,7 +57,7 @@ def selection(idents: Mapping[str, Identification]) -> dict:
     bics = {p: i.bic() for p, i in idents.items()}
     order = sorted(bics, key=bics.get)
     if len(order) < 2:
-        return {"bic": bics, "supported": order[0] if order else None, "margin": None}
+        return {"bic": bics, "supported": None, "margin": None}
     margin = bics[order[1]] - bics[order[0]]
     return {"bic": bics, "margin": margin,
             "supported": order[0] if margin >= BIC_MARGIN else None}
@@ -154,6 +154,14 @@ def identifiability_lines(idents: Mapping[str, Identification]) -> list[str]:
     for par, ident in idents.items():
         corr = ident.posterior.correlation()
         names = ident.posterior.names
+        prior = ident.posterior.prior
+        for n in names:
+            lo, hi = ident.posterior.interval(n)
+            if hi >= prior[1] / 1.5 or lo <= prior[0] * 1.5:
+                end = "upper" if hi >= prior[1] / 1.5 else "lower"
+                lines.append(f"- **{par}, {n}**: the 90 % interval reaches the prior's {end} "
+                             f"end ({prior[0]:g} - {prior[1]:g} m^2 K/W): the data bound it "
+                             "from one side only.")
         for st in ident.posterior.stages:
             ia = st["identifiability"]
             lines.append(f"- **{par}, {ia['system']}**: {ia['statement']}.")
@@ -176,14 +184,15 @@ def selection_lines(idents: Mapping[str, Identification]) -> list[str]:
         lines.append(f"| {p} | {ident.n_parameters} | {ident.chi_square():.1f} | "
                      f"{ident.chi_square() / dof:.2f} | {sel['bic'][p]:.1f} |")
     lines.append("")
-    if sel["supported"]:
+    if sel["margin"] is None:
+        lines.append("One parametrisation: no comparison (run both to compare them).")
+    elif sel["supported"]:
         lines.append(f"Criterion: the lower BIC by {BIC_MARGIN:g} or more. The data support "
                      f"**{sel['supported']}** (BIC lower by {sel['margin']:.1f}).")
     else:
         lines.append(f"Criterion: the lower BIC by {BIC_MARGIN:g} or more. Neither "
-                     "parametrisation is supported over the other "
-                     + (f"(BIC difference {sel['margin']:.1f})." if sel["margin"] is not None
-                        else "."))
+                     f"parametrisation is supported over the other (BIC difference "
+                     f"{sel['margin']:.1f}).")
     return lines
 
 

@@ -16,9 +16,10 @@ from identify.pipeline import fractions_of, identify
 from identify.screen import paper_grid, screen
 from identify.validate import leave_one_out, validate
 
-SMALL = ForwardSettings(box_um=12.0, voxel_um=0.5, replicas=2, seed=3)
+SMALL = ForwardSettings(box_um=12.0, voxel_um=0.5, replicas=3, seed=3)
 TRUE_R = 3.0e-8
-FORMS = ("Al2O3-55", "Al2O3-60", "Al2O3-65")
+# 50-60 vol%: they pack at once in a 12 um box (65 % needs redraws there)
+FORMS = ("Al2O3-50", "Al2O3-55", "Al2O3-60")
 
 
 @pytest.fixture(scope="module")
@@ -53,10 +54,13 @@ def truth():
 
 
 def synthetic(truth, table3, seed):
-    """Four replicates per formulation: truth plus noise at Table 3's replicate spread."""
+    """Four replicates per formulation: truth plus noise at Table 3's replicate spread
+    (root-mean-square sample standard deviation of its Al2O3 formulations, 0.047 W/(m K))."""
+    sd = math.sqrt(np.mean([table3.variance(f) for f in table3.formulations
+                            if f.startswith("Al2O3-") and "AlN" not in f]))
     rng = np.random.default_rng(seed)
-    return Measurements({f: truth[f] + math.sqrt(table3.variance(f)) * rng.standard_normal(4)
-                         for f in FORMS}, f"synthetic seed {seed}")
+    return Measurements({f: truth[f] + sd * rng.standard_normal(4) for f in FORMS},
+                        f"synthetic seed {seed}")
 
 
 def test_formulation_names_give_their_fractions():
@@ -158,8 +162,10 @@ def test_stages_follow_the_papers_hierarchy():
 def test_calibrate_rejects_bad_input(models, table3):
     with pytest.raises(ValueError, match="measurements"):
         calibrate(models, Measurements({"Al2O3-55": table3.values["Al2O3-55"]}, "part"))
+    with pytest.raises(ValueError, match="measurements"):
+        calibrate(models, table3)       # Al2O3-50 is not in Table 3
     with pytest.raises(ValueError, match="grid_points"):
-        calibrate(models, table3, grid_points=2)
+        calibrate(models, synthetic(true_k(0), table3, 0), grid_points=2)
     with pytest.raises(ValueError, match="models"):
         calibrate({}, table3)
     with pytest.raises(ValueError, match="replicas"):
@@ -178,8 +184,8 @@ def test_validation_and_leave_one_out(models, truth, table3):
     for r in rows:
         # full solves of two RVEs x 3 directions agree with the data within 10 %
         assert abs(r["error_pct"]) < 10
-        assert len(r["replica_k_iso"]) == 2
-        assert r["paper_predicted"] > 0
+        assert len(r["replica_k_iso"]) == 3
+        assert ("paper_predicted" in r) == (r["formulation"] in ("Al2O3-55", "Al2O3-60"))
     lofo = leave_one_out(models, meas)
     assert len(lofo) == 3
     for r in lofo:

@@ -89,7 +89,8 @@ def test_reproduce_end_to_end_at_tiny_size(tmp_path):
         assert heading in report
     solves = pq.read_table(out / "full_solves.parquet").to_pydict()
     assert set(solves["purpose"]) >= {"reduced basis", "RVE scatter", "validation"}
-    assert np.all(np.array(solves["k_xx"]) > 0.18)
+    # insulating corners of the reduced-basis box (R = 1e-5) fall below the matrix, 0.18
+    assert np.all(np.array(solves["k_xx"]) > 0.05) and max(solves["k_xx"]) > 1.0
     names = {f["path"] for f in json.loads((out / "manifest.json").read_text())["files"]}
     assert {"fig2_psd.png", "fig4_rves.png", "fig6_parity.png", "fig8_screening.png",
             "report.md", "identified.json", "full_solves.parquet"} <= names
