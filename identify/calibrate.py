@@ -14,7 +14,8 @@ the replica mean) and ``e`` its certified error bound. The RVE term is an upper 
 part of the error: the replica mean misses the ensemble mean by ``sigma_rve / sqrt(R)``.
 The prior is log-uniform over the reduced-basis box.
 
-The posterior is evaluated on a dense grid in log10 R (no sampler to tune or converge), stage
+The posterior is evaluated on a dense grid in log10 R (no sampler to tune or converge): one
+over the prior, then one of as many points over the region that holds the posterior, stage
 by stage as the paper's hierarchy: first each single-filler system (its ``R_<f>_silicone``
 and, under the area parametrisation, ``Rff_<f>_<f>``), then each two-filler system for its
 new parameter with the earlier stages' posterior samples carried along (a *cut* posterior:
@@ -40,6 +41,9 @@ from .measurements import Measurements
 
 __all__ = ["Stage", "Posterior", "stages_of", "calibrate", "pooled_scatter", "variance",
            "UNIDENTIFIED_RATIO"]
+
+#: Depth (in log-likelihood) of the region that the second, refined grid covers.
+REFINE_DEPTH = 25.0
 
 #: A principal direction whose posterior spread exceeds this fraction of the prior's is
 #: reported as not determined by the data.
@@ -233,28 +237,42 @@ def calibrate(models: Mapping[str, ForwardModel], measurements: Measurements, *,
                                     "statement": "no parameter of its own: predicted from "
                                                  "the earlier stages"}})
             continue
-        axis = _grid(prior, grid_points)
-        step = axis[1] - axis[0]
-        mesh = np.meshgrid(*[axis] * len(stage.new), indexing="ij")
-        G = np.stack([m.ravel() for m in mesh], axis=1)              # (g, new)
         if stage.carried:
             pick = rng.choice(samples.shape[0], size=min(carried_samples, samples.shape[0]),
                               replace=False)
             prev = samples[pick]                                       # (s, known)
         else:
             prev = np.zeros((1, 0))
-        S, g = prev.shape[0], G.shape[0]
-        columns = {}
-        for j, p in enumerate(names if stage.carried else []):
-            columns[p] = np.repeat(10 ** prev[:, j], g)
-        for j, p in enumerate(stage.new):
-            columns[p] = np.tile(10 ** G[:, j], S)
-        ll = _stage_loglike(models, stage, measurements, columns, scatter).reshape(S, g)
+
+        def evaluate(axes):
+            mesh = np.meshgrid(*axes, indexing="ij")
+            G = np.stack([m.ravel() for m in mesh], axis=1)          # (g, new)
+            columns = {}
+            for j, p in enumerate(names if stage.carried else []):
+                columns[p] = np.repeat(10 ** prev[:, j], G.shape[0])
+            for j, p in enumerate(stage.new):
+                columns[p] = np.tile(10 ** G[:, j], prev.shape[0])
+            ll = _stage_loglike(models, stage, measurements, columns, scatter)
+            return G, ll.reshape(prev.shape[0], G.shape[0]), mesh[0].shape
+
+        # a grid over the prior, then the same number of points over the region that holds
+        # the posterior (log-likelihood within REFINE_DEPTH of its maximum, one cell added)
+        axes = [_grid(prior, grid_points)] * len(stage.new)
+        G, ll, shape = evaluate(axes)
+        keep = (ll.max(axis=0) > ll.max() - REFINE_DEPTH)
+        lo_p, hi_p = axes[0][0], axes[0][-1]
+        step0 = axes[0][1] - axes[0][0]
+        axes = [np.linspace(max(lo_p, G[keep, j].min() - step0),
+                            min(hi_p, G[keep, j].max() + step0), grid_points)
+                for j in range(len(stage.new))]
+        G, ll, shape = evaluate(axes)
+        steps = np.array([a[1] - a[0] for a in axes])
+        S, g = ll.shape
         w = np.exp(ll - ll.max())
         pick = rng.choice(S * g, size=n_samples, p=(w / w.sum()).ravel())
         si, gi = np.divmod(pick, g)
-        jitter = rng.uniform(-0.5, 0.5, size=(n_samples, len(stage.new))) * step
-        new_samples = np.clip(G[gi] + jitter, axis[0], axis[-1])
+        jitter = rng.uniform(-0.5, 0.5, size=(n_samples, len(stage.new))) * steps
+        new_samples = np.clip(G[gi] + jitter, [a[0] for a in axes], [a[-1] for a in axes])
         if stage.carried:
             samples = np.hstack([prev[si], new_samples])
             # the best point: earlier stages' best values, this stage's grid
@@ -269,11 +287,11 @@ def calibrate(models: Mapping[str, ForwardModel], measurements: Measurements, *,
         for j, p in enumerate(stage.new):
             best[p] = float(10 ** G[bg, j])
         names += list(stage.new)
-        marg = w.sum(axis=0).reshape(mesh[0].shape)
+        marg = w.sum(axis=0).reshape(shape)
         stages_out.append({
             "system": list(stage.system), "formulations": list(stage.formulations),
             "parameters": list(stage.new), "carried": list(stage.carried),
-            "rve_scatter": scatter, "grid_log10": axis.tolist(),
+            "rve_scatter": scatter, "axes_log10": [a.tolist() for a in axes],
             "density": (marg / marg.sum()).tolist(),
             "log_likelihood_best": float(ll_best[bg]),
             "identifiability": {"system": "+".join(stage.system),

@@ -160,14 +160,14 @@ def posterior_figure(ident: Identification, path: Path) -> Path:
     stages = [s for s in ident.posterior.stages if s["parameters"]]
     fig, axes = plt.subplots(1, len(stages), figsize=(4.5 * len(stages), 4), squeeze=False)
     for ax, st in zip(axes[0], stages):
-        g = np.array(st["grid_log10"])
+        axes_ = [np.array(a) for a in st["axes_log10"]]
         dens = np.array(st["density"])
         if dens.ndim == 2:
-            ax.pcolormesh(g, g, dens.T, shading="auto", cmap="viridis")
+            ax.pcolormesh(axes_[0], axes_[1], dens.T, shading="auto", cmap="viridis")
             ax.set_xlabel(f"log10 {st['parameters'][0]}")
             ax.set_ylabel(f"log10 {st['parameters'][1]}")
         else:
-            ax.plot(g, dens)
+            ax.plot(axes_[0], dens)
             ax.set_xlabel(f"log10 {st['parameters'][0]}")
             ax.set_ylabel("posterior mass per grid point")
         ax.set_title(f"{ident.parametrisation}: {'+'.join(st['system'])}")
