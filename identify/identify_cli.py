@@ -88,7 +88,7 @@ def add_identify_parsers(sub, parser_class, number: Callable) -> None:
     rep.add_argument("--out", default="itr-reproduce", help="output folder "
                      "(default itr-reproduce)")
     rep.add_argument("--full", action="store_true", help="the paper's RVE: 40 um box, 0.1 um "
-                     "voxels (400^3; hours and tens of GB)")
+                     "voxels (400^3; not measured here: expect hours)")
     rep.add_argument("--no-leave-one-out", action="store_true",
                      help="skip the leave-one-formulation-out study")
     _common(rep, number)
