@@ -84,8 +84,8 @@ def rve_figure(ident: Identification, names: Sequence[str], path: Path) -> Path:
     names = [n for n in names if n in ident.models]
     fig, axes = plt.subplots(1, len(names), figsize=(4 * len(names), 4.2), squeeze=False)
     with tempfile.TemporaryDirectory() as tmp:
-        for ax, name in zip(axes[0], names):
-            png = Path(tmp) / f"{len(name)}-{abs(hash(name))}.png"
+        for i, (ax, name) in enumerate(zip(axes[0], names)):
+            png = Path(tmp) / f"rve{i}.png"
             render_particles(ident.models[name].microstructures[0], str(png),
                              colors={"Al2O3": "red", "AlN": "blue"}, window_size=(600, 600))
             ax.imshow(plt.imread(png))

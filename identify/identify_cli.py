@@ -9,7 +9,6 @@ __all__ = ["add_identify_parsers"]
 
 
 def _settings(args: argparse.Namespace, full: bool = False):
-    from .forward import ForwardSettings
     from .reproduce import ReproduceSettings
 
     base = ReproduceSettings.full() if full else ReproduceSettings()
@@ -18,8 +17,7 @@ def _settings(args: argparse.Namespace, full: bool = False):
                                  ("replicas", args.replicas), ("seed", args.seed))
                if v is not None}
     try:
-        fw = ForwardSettings(**{**fw.to_dict(), "prior_m2K_per_W": fw.prior_m2K_per_W,
-                                **changes})
+        fw = fw.with_(**changes)
     except ValueError as exc:
         msg = str(exc)
         for name, flag in (("box_um/voxel_um", "--box-um/--voxel-um"), ("box_um", "--box-um"),

@@ -142,11 +142,11 @@ def identify(measurements: Measurements, parametrisation: str = "gap", *,
         else:
             models[f] = _build(f, comps[f], par, settings, None, progress, echo)
     seconds = {"single-filler models": time.perf_counter() - t0}
-    post, screening = None, []
-    if singles:
+    post = None
+    if singles and multis:
+        # the two-filler models hold these best values (the final call repeats them exactly)
         t = time.perf_counter()
         post = calibrate(models, measurements, grid_points=grid_points, seed=seed)
-        screening = hierarchical_screen(models, measurements)
         seconds["single-filler calibration"] = time.perf_counter() - t
     t = time.perf_counter()
     for f in multis:

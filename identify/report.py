@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 
 import numpy as np
 
@@ -242,10 +242,6 @@ def residual_lines(idents: Mapping[str, Identification]) -> list[str]:
             cells += [f"{k:.3f}", f"{(m - k) / math.sqrt(v):+.1f}"]
         lines.append("| " + " | ".join(cells) + " |")
     return lines
-
-
-def formulations_used(models: Sequence[str]) -> str:
-    return ", ".join(models)
 
 
 def difference_lines(idents: Mapping[str, Identification]) -> list[str]:

@@ -136,8 +136,7 @@ def run_reproduce(settings: ReproduceSettings, out: Path, *, progress: bool = Tr
                                       seed=settings.seed)
     t_lofo = time.perf_counter() - t
     echo("figures and fields")
-    files = _figures(idents, validation, out)
-    psd_fits = files.pop()
+    files, psd_fits = _figures(idents, validation, out)
     files.append(write_solves(list(idents.values()), out / "full_solves.parquet"))
     data = {p: {**report.identified_dict(i), "validation": validation[p],
                 "leave_one_out": lofo.get(p, [])} for p, i in idents.items()}
@@ -156,7 +155,9 @@ def run_reproduce(settings: ReproduceSettings, out: Path, *, progress: bool = Tr
     return files
 
 
-def _figures(idents: dict[str, Identification], validation: dict, out: Path) -> list:
+def _figures(idents: dict[str, Identification], validation: dict, out: Path
+             ) -> tuple[list[Path], dict]:
+    """The figures and the temperature field; returns their paths and the PSD fits."""
     first = next(iter(idents.values()))
     files = []
     psd_png, fits = figures.psd_figure(first, out / "fig2_psd.png")
@@ -169,8 +170,7 @@ def _figures(idents: dict[str, Identification], validation: dict, out: Path) -> 
         files.append(figures.posterior_figure(ident, out / f"posterior_{par}.png"))
     target = "Al2O3-60" if "Al2O3-60" in first.models else next(iter(first.models))
     files += _temperature_field(idents.get("gap", first), target, out)
-    files.append(fits)
-    return files
+    return files, fits
 
 
 def _reproduce_markdown(idents, meas, validation, lofo, psd_fits, timing, settings) -> str:
