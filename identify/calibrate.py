@@ -1,7 +1,8 @@
 """Bayesian calibration of interface resistances on reduced-basis forward models.
 
-The likelihood of one formulation's measured mean ``m`` given parameters ``theta`` is
-Gaussian with the variance
+The likelihood of one formulation's measured mean ``m`` given parameters ``theta`` is a
+Student t (:func:`log_likelihood`: the replicate variance is estimated from few replicates,
+its degrees of freedom by Welch-Satterthwaite) of squared scale
 
     v(theta) = s^2 / n  +  (sigma_rve k(theta))^2  +  e(theta)^2,
 
@@ -35,11 +36,13 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.special import gammaln
 
 from .forward import ForwardModel
 from .measurements import Measurements
 
 __all__ = ["Stage", "Posterior", "stages_of", "calibrate", "pooled_scatter", "variance",
+           "log_likelihood",
            "UNIDENTIFIED_RATIO"]
 
 #: Depth (in log-likelihood) of the region that the second, refined grid covers.
@@ -153,9 +156,26 @@ def _stage_loglike(models: Mapping[str, ForwardModel], stage: Stage, meas: Measu
     total = 0.0
     for f in stage.formulations:
         k, err = models[f].predict(columns)
-        v = variance(meas.standard_error(f), k, err, scatter, models[f].carried_scatter)
-        total = total - 0.5 * (meas.mean(f) - k) ** 2 / v - 0.5 * np.log(2 * math.pi * v)
+        se = meas.standard_error(f)
+        v = variance(se, k, err, scatter, models[f].carried_scatter)
+        total = total + log_likelihood(meas.mean(f) - k, v, se ** 2, meas.values[f].size)
     return total
+
+
+def log_likelihood(residual: np.ndarray, v: np.ndarray, v_measured: float,
+                   n: int) -> np.ndarray:
+    """Log density of ``residual`` (W/(m K)) under a Student t of scale ``sqrt(v)`` whose
+    degrees of freedom follow from ``v_measured`` (the squared standard error, estimated
+    from ``n`` replicates, ``n - 1`` degrees of freedom) and the rest of ``v`` (taken as
+    known) by Welch-Satterthwaite: ``nu = v^2 / (v_measured^2 / (n - 1))``. With the
+    replicate variance estimated from four samples, a Gaussian would take a sample variance
+    that came out small at face value and weigh that formulation too much; the t keeps the
+    uncertainty of the estimate (for ``nu -> inf`` it is the Gaussian)."""
+    v = np.asarray(v, dtype=np.float64)
+    nu = np.minimum(v ** 2 * (n - 1) / max(v_measured ** 2, 1e-300), 1e6)
+    z2 = residual ** 2 / v
+    return (gammaln((nu + 1) / 2) - gammaln(nu / 2) - 0.5 * np.log(nu * math.pi * v)
+            - 0.5 * (nu + 1) * np.log1p(z2 / nu))
 
 
 def variance(standard_error: float, k: np.ndarray, err: np.ndarray, scatter: float,

@@ -6,7 +6,10 @@ the two-filler formulations hold the single-filler parameters at their best valu
 their reduced bases vary only their own contact parameter (none under the gap
 parametrisation). The earlier stages' uncertainty enters a two-filler formulation's
 likelihood as the relative spread of its k_iso over :data:`CARRIED_DRAWS` posterior draws
-(full solves). Everything is then calibrated and screened. Formulation names give the
+(full solves). Each group of models is calibrated once, its replicas are solved at the best
+values (the *anchor*: the replica factor and the RVE scatter there, see
+:meth:`identify.forward.ForwardModel.anchor_at`) and it is calibrated again. Everything is
+then calibrated and screened. Formulation names give the
 composition: a Table 2 name, or ``<filler>-<vol%>`` and ``<filler>-<vol%>-<filler>-<vol%>``
 (e.g. ``Al2O3-62``).
 """
@@ -142,12 +145,9 @@ def identify(measurements: Measurements, parametrisation: str = "gap", *,
         else:
             models[f] = _build(f, comps[f], par, settings, None, progress, echo)
     seconds = {"single-filler models": time.perf_counter() - t0}
-    post = None
-    if singles and multis:
-        # the two-filler models hold these best values (the final call repeats them exactly)
-        t = time.perf_counter()
-        post = calibrate(models, measurements, grid_points=grid_points, seed=seed)
-        seconds["single-filler calibration"] = time.perf_counter() - t
+    t = time.perf_counter()
+    post = _anchored(models, singles, measurements, grid_points, seed) if singles else None
+    seconds["single-filler calibration and anchors"] = time.perf_counter() - t
     t = time.perf_counter()
     for f in multis:
         params = par.parameters(list(comps[f]))
@@ -155,13 +155,26 @@ def identify(measurements: Measurements, parametrisation: str = "gap", *,
         models[f] = _build(f, comps[f], par, settings, fixed, progress, echo)
         if fixed:
             models[f].carried_scatter = _carried_scatter(models[f], post, seed)
-    seconds["two-filler models"] = time.perf_counter() - t
+    if any(models[f].rb is not None for f in multis):
+        _anchored(models, multis, measurements, grid_points, seed)
+    seconds["two-filler models and anchors"] = time.perf_counter() - t
     t = time.perf_counter()
     post = calibrate(models, measurements, grid_points=grid_points, seed=seed)
     screening = hierarchical_screen(models, measurements)
     seconds["calibration and screening"] = time.perf_counter() - t
     return Identification(parametrisation, settings, models, post, screening, seconds,
                           measurements)
+
+
+def _anchored(models: dict[str, ForwardModel], names: list[str], measurements: Measurements,
+              grid_points: int, seed: int) -> Posterior:
+    """Calibrate ``models``, solve every replica of ``names`` at the best values
+    (:meth:`ForwardModel.anchor_at`: the replica factor and RVE scatter there, not at the
+    box centre) and calibrate again; returns the second posterior."""
+    post = calibrate(models, measurements, grid_points=grid_points, seed=seed)
+    for f in names:
+        models[f].anchor_at(post.best)
+    return calibrate(models, measurements, grid_points=grid_points, seed=seed)
 
 
 def _carried_scatter(model: ForwardModel, posterior: Posterior, seed: int) -> float:
