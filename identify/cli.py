@@ -170,6 +170,8 @@ def build_parser() -> argparse.ArgumentParser:
     add_surrogate_parser(sub, _Parser, _number)
     from .identify_cli import add_identify_parsers
     add_identify_parsers(sub, _Parser, _number)
+    from .discrepancy_cli import add_discrepancy_parser
+    add_discrepancy_parser(sub, _Parser, _number)
     return parser
 
 

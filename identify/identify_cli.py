@@ -5,19 +5,17 @@ from __future__ import annotations
 import argparse
 from collections.abc import Callable
 
-__all__ = ["add_identify_parsers"]
+__all__ = ["add_identify_parsers", "forward_settings"]
 
 
-def _settings(args: argparse.Namespace, full: bool = False):
-    from .reproduce import ReproduceSettings
-
-    base = ReproduceSettings.full() if full else ReproduceSettings()
-    fw = base.forward
+def forward_settings(fw, args: argparse.Namespace):
+    """``fw`` (a ForwardSettings) with the command line's --box-um, --voxel-um, --replicas,
+    --seed; a bad value is a CLIError naming the flag."""
     changes = {k: v for k, v in (("box_um", args.box_um), ("voxel_um", args.voxel_um),
                                  ("replicas", args.replicas), ("seed", args.seed))
                if v is not None}
     try:
-        fw = fw.with_(**changes)
+        return fw.with_(**changes)
     except ValueError as exc:
         msg = str(exc)
         for name, flag in (("box_um/voxel_um", "--box-um/--voxel-um"), ("box_um", "--box-um"),
@@ -27,6 +25,13 @@ def _settings(args: argparse.Namespace, full: bool = False):
                 break
         from .cli import CLIError
         raise CLIError(msg, 2) from None
+
+
+def _settings(args: argparse.Namespace, full: bool = False):
+    from .reproduce import ReproduceSettings
+
+    base = ReproduceSettings.full() if full else ReproduceSettings()
+    fw = forward_settings(base.forward, args)
     pars = ("area", "gap") if args.parametrisation == "both" else (args.parametrisation,)
     return ReproduceSettings(forward=fw, parametrisations=pars,
                              leave_one_out=not getattr(args, "no_leave_one_out", False))

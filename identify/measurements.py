@@ -3,7 +3,9 @@
 Two kinds of CSV file:
 
 - a *measurement table* (the paper's Table 3 is shipped and the default):
-  ``formulation,replicate,k_W_per_mK``, one row per sample;
+  ``formulation,replicate,k_W_per_mK``, one row per sample, with an optional
+  ``thickness_mm`` column: the thickness at which an apparent conductivity was measured
+  (read by the discrepancy workflow, :mod:`identify.discrepancy`);
 - *tester readings* (Methods, Eqs. 7-10): ``formulation,replicate,thickness_mm,
   impedance_K_mm2_per_W``, the thermal impedance ``I = A dT / Q`` of one sample at several
   thicknesses. The contact resistance between sample and meter bars is the intercept of
@@ -28,6 +30,7 @@ __all__ = ["Measurements", "read_measurements", "read_tester_readings",
            "conductivity_from_impedance", "TABLE3"]
 
 TABLE_COLUMNS = ("formulation", "replicate", "k_W_per_mK")
+THICKNESS_COLUMN = "thickness_mm"
 READING_COLUMNS = ("formulation", "replicate", "thickness_mm", "impedance_K_mm2_per_W")
 
 
@@ -45,10 +48,14 @@ class Measurements:
         Replicate values per formulation, in file order.
     source : str
         Where they came from.
+    thickness_m : dict of str to ndarray, optional
+        Sample thickness of each replicate, m (where the table has a ``thickness_mm``
+        column).
     """
 
     values: dict[str, np.ndarray]
     source: str
+    thickness_m: dict[str, np.ndarray] | None = None
 
     @property
     def formulations(self) -> list[str]:
@@ -76,8 +83,10 @@ class Measurements:
     def without(self, formulation: str) -> "Measurements":
         """The same table without one formulation (leave-one-out)."""
         self._get(formulation)
+        t = None if self.thickness_m is None else {
+            k: v for k, v in self.thickness_m.items() if k != formulation}
         return Measurements({k: v for k, v in self.values.items() if k != formulation},
-                            f"{self.source} without {formulation}")
+                            f"{self.source} without {formulation}", t)
 
 
 def _read_text(path: Path) -> str:
@@ -138,12 +147,14 @@ def _known_formulations() -> set[str]:
     return set(paper_data.formulations())
 
 
-def _finish(path: Path, values: dict[str, list[float]], source: str) -> Measurements:
+def _finish(path: Path, values: dict[str, list[float]], source: str,
+            thickness: dict[str, list[float]] | None = None) -> Measurements:
     for name, v in values.items():
         if len(v) < 2:
             raise ValueError(f"{path.name}: formulation {name!r} has {len(v)} replicate; at "
                              "least 2 are needed for its variance")
-    return Measurements({k: np.array(v) for k, v in values.items()}, source)
+    t = None if not thickness else {k: np.array(v) * 1e-3 for k, v in thickness.items()}
+    return Measurements({k: np.array(v) for k, v in values.items()}, source, t)
 
 
 def read_measurements(path: str | Path | None = None, *,
@@ -154,7 +165,8 @@ def read_measurements(path: str | Path | None = None, *,
     Parameters
     ----------
     path : str or Path, optional
-        CSV with columns ``formulation,replicate,k_W_per_mK``.
+        CSV with columns ``formulation,replicate,k_W_per_mK`` and optionally
+        ``thickness_mm`` (then on every row).
     formulations : set of str or callable, optional
         Names the table may use (default: the paper's Table 2 formulations), or a function
         that raises ValueError for a name it does not accept (e.g.
@@ -164,7 +176,8 @@ def read_measurements(path: str | Path | None = None, *,
     ------
     ValueError
         Naming file, line and column: missing column, non-numeric, NaN, zero or negative k,
-        unknown formulation, a replicate given twice, fewer than 2 replicates.
+        unknown formulation, a replicate given twice, fewer than 2 replicates, a missing or
+        non-positive thickness where the column exists.
     """
     if path is None:
         from surrogate import paper_data
@@ -176,8 +189,11 @@ def read_measurements(path: str | Path | None = None, *,
     known = _known_formulations() if formulations is None else (
         formulations if callable(formulations) else set(formulations))
     values: dict[str, list[float]] = {}
+    thickness: dict[str, list[float]] = {}
     seen: set[tuple[str, str]] = set()
-    for line, row in _rows(p, text, TABLE_COLUMNS):
+    rows = _rows(p, text, TABLE_COLUMNS)
+    with_thickness = THICKNESS_COLUMN in rows[0][1]
+    for line, row in rows:
         name = row["formulation"]
         _check_formulation(p, line, name, known)
         rep = row["replicate"]
@@ -185,7 +201,9 @@ def read_measurements(path: str | Path | None = None, *,
             raise ValueError(f"{p.name} line {line}: replicate {rep!r} of {name!r} given twice")
         seen.add((name, rep))
         values.setdefault(name, []).append(_number(p, line, row, "k_W_per_mK"))
-    return _finish(p, values, TABLE3 if path is None else str(p))
+        if with_thickness:
+            thickness.setdefault(name, []).append(_number(p, line, row, THICKNESS_COLUMN))
+    return _finish(p, values, TABLE3 if path is None else str(p), thickness)
 
 
 def conductivity_from_impedance(thickness_m: np.ndarray,

@@ -1,0 +1,140 @@
+"""Report of the discrepancy workflow: markdown, JSON and a before/after figure."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from itr_fv.io import atomic_path, begin_run, write_manifest, write_text
+
+from .discrepancy import Discrepancy, DiscrepancySettings, ModelFit, find_discrepancy
+from .measurements import Measurements
+
+__all__ = ["report_lines", "gap_figure", "run_discrepancy"]
+
+
+def _fit_row(d: Discrepancy, m: ModelFit) -> str:
+    e = next((e for e in d.effects if e.name == m.name), None)
+    if e is None:
+        par = "-"
+    else:
+        lo, hi = m.interval
+        par = (f"{e.parameter} = {m.parameters[e.parameter]:.3g} "
+               f"({lo:.3g} - {hi:.3g}; nominal {e.nominal:g})")
+    rs = ", ".join(f"{k} {v:.2e}" for k, v in m.parameters.items() if k.startswith("R_"))
+    edge = " (R at the grid edge)" if m.at_grid_edge else ""
+    return (f"| {m.name} | {par} | {rs}{edge} | {m.chi_square:.1f} / {m.dof(len(d.groups))} "
+            f"| {d.p_value(m):.2g} | {m.bic:.1f} | {d.base.bic - m.bic:+.1f} |")
+
+
+def report_lines(d: Discrepancy, settings: DiscrepancySettings) -> list[str]:
+    """The report's markdown lines."""
+    after = d.winner or (d.candidates[0] if d.candidates else d.base)
+    lines = ["## Verdict", "", f"**{d.verdict}**: {d.statement}", "",
+             "## Residuals before and after", "",
+             f"Base model (one R per filler) and {after.name} at their best values; "
+             "z = (measured - model) / sqrt(variance), the variance holding the replicate "
+             "variance of the mean and the RVE scatter.", "",
+             "| group | measured (W/(m K)) | base | base error % | base z | "
+             f"{after.name} | error % | z |", "|---|---|---|---|---|---|---|---|"]
+    for i, g in enumerate(d.groups):
+        zb = (g.mean - d.base.predicted[i]) / np.sqrt(d.base.variance[i])
+        za = (g.mean - after.predicted[i]) / np.sqrt(after.variance[i])
+        lines.append(f"| {g.label} | {g.mean:.3f} +- {g.standard_error:.3f} | "
+                     f"{d.base.predicted[i]:.3f} | {100 * (d.base.predicted[i] / g.mean - 1):+.1f}"
+                     f" | {zb:+.2f} | {after.predicted[i]:.3f} | "
+                     f"{100 * (after.predicted[i] / g.mean - 1):+.1f} | {za:+.2f} |")
+    lines += ["", "## Structure of the base residuals", ""]
+    lines += [f"- {s}" for s in d.structure]
+    lines += ["", "## Candidates (ranked by BIC)", "",
+              "| model | effect parameter (90 % interval) | resistances (m^2 K/W) | "
+              "chi-square / dof | p | BIC | BIC gain |", "|---|---|---|---|---|---|---|",
+              _fit_row(d, d.base)]
+    lines += [_fit_row(d, m) for m in d.candidates]
+    for name, why in d.skipped.items():
+        lines.append(f"| {name} | not tried: {why} | | | | | |")
+    lines += ["", f"A candidate is named when it lowers the BIC by {settings.bic_margin:g} or "
+              f"more, leaves no significant residual (p >= {settings.significance:g}) and "
+              "needs no resistance at the edge of its range; candidates within "
+              f"{settings.tie_margin:g} of the best are reported as a tie.",
+              "", "## The library", "", "| effect | kind | parameter (grid) | signature | "
+              "separated by |", "|---|---|---|---|---|"]
+    for e in d.effects:
+        grid = ", ".join(f"{v:g}" for v in e.values)
+        lines.append(f"| {e.name} | {e.kind} | {e.parameter} ({grid}) | {e.signature} | "
+                     f"{e.separate_by} |")
+    f = settings.forward
+    t = d.tables
+    lines += ["", "## Settings", "",
+              f"- RVE: {f.box_um:g} um box, {f.voxel_um:g} um voxels, {f.replicas} replicas "
+              f"(packing seed {f.seed}), gap contact model, solver tolerance {f.solver_tol:g}",
+              f"- resistance grid (m^2 K/W): "
+              f"{', '.join(f'{r:.1e}' for r in settings.r_grid_m2K_per_W)}",
+              "- RVE scatter per formulation (%): " + ", ".join(
+                  f"{k} {100 * v:.2f}" for k, v in (t.rve_scatter.items() if t else [])),
+              f"- full solves: {t.solves if t else 0} in {t.seconds if t else 0:.0f} s"]
+    if d.left_out:
+        lines.append(f"- left out (two fillers): {', '.join(d.left_out)}")
+    return lines
+
+
+def gap_figure(d: Discrepancy, path: Path) -> Path:
+    """Relative error of the base model and of the named (or best) candidate per group."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    after = d.winner or (d.candidates[0] if d.candidates else d.base)
+    meas = np.array([g.mean for g in d.groups])
+    se = np.array([g.standard_error for g in d.groups])
+    x = np.arange(len(d.groups))
+    fig, ax = plt.subplots(figsize=(max(6, 0.6 * len(x) + 2), 4))
+    ax.bar(x - 0.2, 100 * (d.base.predicted / meas - 1), 0.4, label="base model")
+    ax.bar(x + 0.2, 100 * (after.predicted / meas - 1), 0.4, label=f"+ {after.name}")
+    ax.errorbar(x, np.zeros_like(x, dtype=float), yerr=100 * 1.645 * se / meas, fmt="none",
+                ecolor="k", capsize=3, label="measurement 90 %")
+    ax.axhline(0, color="k", lw=0.5)
+    ax.set_xticks(x, [g.label for g in d.groups], rotation=45, ha="right")
+    ax.set_ylabel("model / measured - 1 (%)")
+    ax.set_title(f"Discrepancy: {d.verdict}")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=120, format="png")
+    plt.close(fig)
+    return Path(path)
+
+
+def run_discrepancy(meas: Measurements, settings: DiscrepancySettings, out: Path, *,
+                    effects: list | None = None, progress: bool = True,
+                    echo: Callable[[str], None] = print) -> Discrepancy:
+    """The workflow on ``meas`` (``effects``: the candidates, default the whole library)
+    with its report in ``out``: discrepancy.md, .json, .png, manifest.json."""
+    from tqdm.auto import tqdm
+
+    from .discrepancy import build_tables, n_solves
+    from .effects import default_effects
+    from .pipeline import fractions_of
+
+    out = Path(out)
+    begin_run(out)
+    singles = {f: fractions_of(f) for f in meas.formulations if len(fractions_of(f)) == 1}
+    effects = default_effects() if effects is None else list(effects)
+    with tqdm(total=n_solves(len(singles), settings, effects), desc="forward solves",
+              unit="solve", disable=not progress) as bar:
+        tables = build_tables(singles, settings=settings, effects=effects,
+                              tick=lambda: bar.update())
+    d = find_discrepancy(meas, settings=settings, tables=tables)
+    files = [write_text(out / "discrepancy.json", json.dumps(d.to_dict(), indent=2) + "\n")]
+    files.append(gap_figure(d, out / "discrepancy.png"))
+    lines = [f"# Discrepancy between model and measurements: {meas.source}", ""]
+    lines += report_lines(d, settings)
+    lines += ["", "Figure: `discrepancy.png` (relative error per group, before and after)."]
+    files.append(write_text(out / "discrepancy.md", "\n".join(lines) + "\n"))
+    files.append(write_manifest(out, files, {"job": "discrepancy", "measurements": meas.source,
+                                             "forward": settings.forward.to_dict()}))
+    echo(f"discrepancy: {d.verdict}; wrote {out / 'discrepancy.md'}")
+    return d
