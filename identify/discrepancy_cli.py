@@ -40,23 +40,18 @@ def add_discrepancy_parser(sub, parser_class, number: Callable) -> None:
     p = sub.add_parser("discrepancy", help="where model and measurements disagree, and which "
                        "missing effect explains it",
                        description="Calibrate the base model and each candidate effect "
-                       "(matrix and filler conductivity, porosity, filler fraction, tester "
-                       "contact resistance) on a measurement table, test the residuals and "
-                       "name the effect the data support; writes discrepancy.md, .json, .png "
-                       "and manifest.json.")
+                       "(matrix and filler conductivity, porosity, filler fraction, solid "
+                       "contact spots, tester contact resistance) on a measurement table, "
+                       "test the residuals and name the effect the data support; writes "
+                       "discrepancy.md, .json, .png and manifest.json.")
     p.add_argument("measurements", metavar="MEASUREMENTS", nargs="?", default=None,
                    help="CSV: formulation,replicate,k_W_per_mK[,thickness_mm] (default: the "
                    "paper's Table 3, shipped)")
     p.add_argument("--out", default="itr-discrepancy",
                    help="output folder (default itr-discrepancy)")
-    p.add_argument("--box-um", type=number(float, 0, None, unit=" um"), default=None,
-                   help="RVE edge, um (default 12)")
-    p.add_argument("--voxel-um", type=number(float, 0, None, unit=" um"), default=None,
-                   help="voxel edge, um (default 0.5)")
-    p.add_argument("--replicas", type=number(int, 1, 20, hi_open=False), default=None,
-                   help="RVE replicas per formulation, 2-20 (default 3)")
-    p.add_argument("--seed", type=number(int, 0, None, lo_open=False), default=None,
-                   help="packing seed of the first replica (default 1)")
+    from .identify_cli import rve_arguments
+
+    rve_arguments(p, number, box="12", voxel="0.5")
     p.add_argument("--effects", default=None,
                    help="comma-separated candidates (default all): matrix, filler, porosity, "
                    "fraction, spots, tester")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from collections.abc import Callable
 
-__all__ = ["add_identify_parsers", "forward_settings"]
+__all__ = ["add_identify_parsers", "forward_settings", "rve_arguments"]
 
 
 def forward_settings(fw, args: argparse.Namespace):
@@ -71,15 +71,22 @@ def _common(p: argparse.ArgumentParser, number: Callable) -> None:
     p.add_argument("--parametrisation", choices=["area", "gap", "both"], default="both",
                    help="area (the paper's per-area contact resistance), gap (physical "
                    "contacts) or both (default)")
+    rve_arguments(p, number, box="12; --full 40", voxel="0.25; --full 0.1")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+
+
+def rve_arguments(p: argparse.ArgumentParser, number: Callable, *, box: str,
+                  voxel: str) -> None:
+    """--box-um, --voxel-um, --replicas, --seed (read by :func:`forward_settings`); ``box``
+    and ``voxel`` are the defaults as the help shows them."""
     p.add_argument("--box-um", type=number(float, 0, None, unit=" um"), default=None,
-                   help="RVE edge, um (default 12; --full 40)")
+                   help=f"RVE edge, um (default {box})")
     p.add_argument("--voxel-um", type=number(float, 0, None, unit=" um"), default=None,
-                   help="voxel edge, um (default 0.25; --full 0.1)")
+                   help=f"voxel edge, um (default {voxel})")
     p.add_argument("--replicas", type=number(int, 1, 20, hi_open=False), default=None,
                    help="RVE replicas per formulation, 2-20 (default 3)")
     p.add_argument("--seed", type=number(int, 0, None, lo_open=False), default=None,
                    help="packing seed of the first replica (default 1)")
-    p.add_argument("--no-progress", action="store_true", help="no progress bars")
 
 
 def add_identify_parsers(sub, parser_class, number: Callable) -> None:
