@@ -12,16 +12,10 @@ def _run(args: argparse.Namespace) -> int:
     from .cli import CLIError, output_folder
     from .discrepancy import DiscrepancySettings
     from .discrepancy_report import run_discrepancy
+    from .identify_cli import forward_settings, read_table
     from .measurements import read_measurements
-    from .pipeline import fractions_of
 
-    try:
-        meas = read_measurements(args.measurements, formulations=fractions_of)
-    except ValueError as exc:
-        msg = str(exc)
-        raise CLIError("MEASUREMENTS: " + (msg[len("path: "):] if msg.startswith("path: ")
-                                           else msg), 2) from None
-    from .identify_cli import forward_settings
+    meas = read_table(args.measurements, read_measurements)
 
     settings = DiscrepancySettings(
         forward=forward_settings(DiscrepancySettings().forward, args))

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from collections.abc import Callable
 
-__all__ = ["add_identify_parsers", "forward_settings", "rve_arguments"]
+__all__ = ["add_identify_parsers", "forward_settings", "rve_arguments", "read_table"]
 
 
 def forward_settings(fw, args: argparse.Namespace):
@@ -25,6 +25,20 @@ def forward_settings(fw, args: argparse.Namespace):
                 break
         from .cli import CLIError
         raise CLIError(msg, 2) from None
+
+
+def read_table(path: str | None, reader: Callable):
+    """``reader(path)`` with formulations named by composition; a bad file is a CLIError
+    (status 2) naming MEASUREMENTS."""
+    from .cli import CLIError
+    from .pipeline import fractions_of
+
+    try:
+        return reader(path, formulations=fractions_of)
+    except ValueError as exc:
+        msg = str(exc)
+        raise CLIError("MEASUREMENTS: " + (msg[len("path: "):] if msg.startswith("path: ")
+                                           else msg), 2) from None
 
 
 def _settings(args: argparse.Namespace, full: bool = False):
@@ -48,20 +62,13 @@ def _reproduce(args: argparse.Namespace) -> int:
 
 
 def _identify(args: argparse.Namespace) -> int:
-    from .cli import CLIError, output_folder
+    from .cli import output_folder
     from .measurements import read_measurements, read_tester_readings
     from .reproduce import run_identify
 
     settings = _settings(args)
-    from .pipeline import fractions_of
-
-    reader = read_tester_readings if args.readings else read_measurements
-    try:
-        meas = reader(args.measurements, formulations=fractions_of)
-    except ValueError as exc:
-        msg = str(exc)
-        raise CLIError("MEASUREMENTS: " + (msg[len("path: "):] if msg.startswith("path: ")
-                                           else msg), 2) from None
+    meas = read_table(args.measurements,
+                      read_tester_readings if args.readings else read_measurements)
     with output_folder(args.out) as out:
         run_identify(meas, settings, out, progress=not args.no_progress)
     return 0
