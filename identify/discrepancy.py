@@ -40,7 +40,9 @@ from scipy.interpolate import RegularGridInterpolator
 from scipy.special import logsumexp
 
 from .effects import Effect, default_effects
-from .forward import PARAMETRISATIONS, ForwardModel, ForwardSettings, full_solve
+from itr_fv.parameters import parameter_name
+
+from .forward import MATRIX, PARAMETRISATIONS, ForwardModel, ForwardSettings, full_solve
 from .measurements import Measurements
 
 __all__ = ["DiscrepancySettings", "Group", "ModelFit", "Discrepancy", "ForwardTables",
@@ -164,7 +166,6 @@ class ForwardTables:
 
     settings: DiscrepancySettings
     effects: list[Effect]
-    fractions: dict[str, dict[str, float]]
     base: dict[str, np.ndarray]
     effect: dict[str, dict[str, np.ndarray]]
     replica_factor: dict[str, float]
@@ -181,8 +182,8 @@ def n_solves(n_formulations: int, settings: DiscrepancySettings,
     return n_formulations * (len(settings.r_grid_m2K_per_W) * cols + settings.forward.replicas)
 
 
-def _materials(model: ForwardModel, filler: str, R: float):
-    return model.materials({f"R_{filler}_silicone": float(R)})
+def _r_name(filler: str) -> str:
+    return parameter_name("R", filler, MATRIX)
 
 
 def build_tables(fractions: dict[str, dict[str, float]], *,
@@ -221,18 +222,15 @@ def build_tables(fractions: dict[str, dict[str, float]], *,
             if len(comp) != 1:
                 continue
             (filler, _), = comp.items()
+            r_name = _r_name(filler)
             model = ForwardModel(f, comp, PARAMETRISATIONS["gap"], s)
             model.microstructures = [model.pack(r) for r in range(s.replicas)]
-            mat_s = _materials(model, filler, settings.r_scatter_m2K_per_W)
-            model.replica_k = np.array([full_solve(ms, mat_s, s.solver_tol)
-                                        for ms in model.microstructures])
+            model.replica_k = model.solve_replicas({r_name: settings.r_scatter_m2K_per_W},
+                                                   tick, purpose="RVE scatter")
             n += len(model.microstructures)
-            if tick is not None:
-                for _ in model.microstructures:
-                    tick()
             factor[f], scatter[f] = model.replica_factor, model.rve_scatter
             ms0 = model.microstructures[0]
-            base[f] = np.array([solve(ms0, _materials(model, filler, R))
+            base[f] = np.array([solve(ms0, model.materials({r_name: R}))
                                 for R in settings.r_grid_m2K_per_W])
             for e in effects:
                 cols = []
@@ -241,11 +239,11 @@ def build_tables(fractions: dict[str, dict[str, float]], *,
                         cols.append(base[f])
                         continue
                     ms = e.microstructure(ms0, theta, seed=s.seed)
-                    cols.append(np.array([solve(ms, e.materials(_materials(model, filler, R),
+                    cols.append(np.array([solve(ms, e.materials(model.materials({r_name: R}),
                                                                 theta))
                                           for R in settings.r_grid_m2K_per_W]))
                 table[e.name][f] = np.stack(cols, axis=1)          # (nR, ntheta)
-    return ForwardTables(settings, effects, dict(fractions), base, table, factor, scatter, n,
+    return ForwardTables(settings, effects, base, table, factor, scatter, n,
                          time.perf_counter() - t0)
 
 
@@ -385,7 +383,7 @@ def fit_model(tables: ForwardTables, groups: Sequence[Group], effect: Effect | N
     params, pred, var = {}, np.zeros(len(groups)), np.zeros(len(groups))
     best_i = {fl: int(np.argmax(ll[fl][:, j])) for fl in fillers}
     for fl in fillers:
-        params[f"R_{fl}_silicone"] = float(10 ** fine_r[best_i[fl]])
+        params[_r_name(fl)] = float(10 ** fine_r[best_i[fl]])
     for i, g in enumerate(groups):
         pred[i] = float(model_k(g, best_i[g.filler], j))
         var[i] = g.standard_error ** 2 + (scatter[g.filler] * pred[i]) ** 2

@@ -121,7 +121,8 @@ def run_discrepancy(meas: Measurements, settings: DiscrepancySettings, out: Path
 
     out = Path(out)
     begin_run(out)
-    singles = {f: fractions_of(f) for f in meas.formulations if len(fractions_of(f)) == 1}
+    comps = {f: fractions_of(f) for f in meas.formulations}
+    singles = {f: c for f, c in comps.items() if len(c) == 1}
     effects = default_effects() if effects is None else list(effects)
     with tqdm(total=n_solves(len(singles), settings, effects), desc="forward solves",
               unit="solve", disable=not progress) as bar:
