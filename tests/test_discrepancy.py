@@ -102,36 +102,42 @@ def test_an_effect_outside_the_library_is_unexplained(tables):
     assert d.chi_square_per_dof(d.candidates[0]) > 2.0
 
 
+def repack(ms, seed, *, crowd=1.0, **packing):
+    """``ms``'s fillers packed anew at their analytic volume fractions times ``crowd``
+    (packing seeds ``seed``, ``seed + 100``, ... as :meth:`ForwardModel.pack`), the
+    test's box, voxel and size cut; ``packing`` goes to ``generate_rve``. Returns the
+    Microstructure and the fillers' total nominal fraction."""
+    psd = paper_data.psd_lognormal()
+    s = SETTINGS.forward
+    t = ms.particles
+    phi = {str(m): float(np.sum(4 / 3 * math.pi * t.radii_m[t.material == m] ** 3))
+           / float(np.prod(ms.box_m)) for m in np.unique(t.material)}
+    specs = [FillerSpec(m, mu=psd[m][0], sigma=psd[m][1], volume_fraction=v * crowd)
+             for m, v in phi.items()]
+    for attempt in range(6):                     # dense packings may need another seed
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", UserWarning)   # the box cut, as in pack()
+                return generate_rve(specs, box_um=s.box_um, voxel_um=s.voxel_um,
+                                    seed=seed + 100 * attempt, matrix=ms.names[0],
+                                    max_diameter_box_ratio=s.max_diameter_box_ratio,
+                                    **packing), sum(phi.values())
+        except RuntimeError:
+            if attempt == 5:
+                raise
+
+
 def resin_pockets(pocket_fraction):
     """Filler agglomeration, an effect outside the library: the filler of each RVE repacked at
     ``phi / (1 - pocket_fraction)`` and the particles nearest the box centre removed (never
     past the nominal volume), leaving one particle-free silicone pocket of about
     ``pocket_fraction`` of the volume per box and the filler crowded into the rest."""
-    psd = paper_data.psd_lognormal()
-    s = SETTINGS.forward
-
     def modify(ms, seed):
-        t = ms.particles
-        box, vol = ms.box_m, float(np.prod(ms.box_m))
-        phi = {str(m): float(np.sum(4 / 3 * math.pi * t.radii_m[t.material == m] ** 3)) / vol
-               for m in np.unique(t.material)}
-        specs = [FillerSpec(m, mu=psd[m][0], sigma=psd[m][1],
-                            volume_fraction=v / (1 - pocket_fraction)) for m, v in phi.items()]
-        for attempt in range(6):                 # dense packings may need another seed
-            try:
-                with warnings.catch_warnings():
-                    warnings.simplefilter("ignore", UserWarning)   # the box cut, as in pack()
-                    dense = generate_rve(specs, box_um=s.box_um, voxel_um=s.voxel_um,
-                                         seed=seed + 7 + 100 * attempt, matrix=ms.names[0],
-                                         max_diameter_box_ratio=s.max_diameter_box_ratio)
-                break
-            except RuntimeError:
-                if attempt == 5:
-                    raise
-        d = dense.particles
+        dense, phi = repack(ms, seed + 7, crowd=1 / (1 - pocket_fraction))
+        d, box = dense.particles, ms.box_m
         x = d.centers_m - box / 2
         x -= box * np.round(x / box)
-        excess = float(np.sum(4 / 3 * math.pi * d.radii_m ** 3)) - sum(phi.values()) * vol
+        excess = float(np.sum(4 / 3 * math.pi * d.radii_m ** 3)) - phi * float(np.prod(box))
         keep, removed = np.ones(len(d), dtype=bool), 0.0
         for i in np.argsort(np.einsum("ij,ij->i", x, x)):
             v = 4 / 3 * math.pi * d.radii_m[i] ** 3
@@ -147,27 +153,7 @@ def silicone_films(gap_um):
     """A silicone film of ``gap_um`` between all touching particles (a bound layer that keeps
     them apart; the library's contact spots only add conduction): each RVE repacked at its
     own filler fractions with ``min_gap_um``."""
-    psd = paper_data.psd_lognormal()
-    s = SETTINGS.forward
-
-    def modify(ms, seed):
-        t = ms.particles
-        vol = float(np.prod(ms.box_m))
-        specs = [FillerSpec(str(m), mu=psd[str(m)][0], sigma=psd[str(m)][1],
-                            volume_fraction=float(np.sum(4 / 3 * math.pi * t.radii_m[
-                                t.material == m] ** 3)) / vol) for m in np.unique(t.material)]
-        for attempt in range(6):
-            try:
-                with warnings.catch_warnings():
-                    warnings.simplefilter("ignore", UserWarning)
-                    return generate_rve(specs, box_um=s.box_um, voxel_um=s.voxel_um,
-                                        seed=seed + 100 * attempt, matrix=ms.names[0],
-                                        min_gap_um=gap_um,
-                                        max_diameter_box_ratio=s.max_diameter_box_ratio)
-            except RuntimeError:
-                if attempt == 5:
-                    raise
-    return modify
+    return lambda ms, seed: repack(ms, seed, min_gap_um=gap_um)[0]
 
 
 def test_resin_pockets_are_absorbed_by_the_resistances_and_not_named(tables):
