@@ -124,6 +124,21 @@ class Posterior:
         lo, hi = np.quantile(x, [a, 1 - a])
         return float(10 ** lo), float(10 ** hi)
 
+    def central(self) -> dict[str, float]:
+        """A central point of the posterior, m^2 K/W: the sample nearest the marginal
+        medians (in log10, each parameter scaled by its posterior standard deviation).
+
+        Where the data leave a ridge (the per-area parametrisation's R_si / Rff), the best
+        grid point can lie anywhere along it, and a later stage held there fits its own
+        parameter to that end of the ridge; the medians sit where most of the posterior
+        mass is, and the nearest sample is a point the posterior holds (the medians of a
+        ridge that bends back, or of separate modes, need not be)."""
+        x = self.samples
+        sd = x.std(axis=0)
+        z = (x - np.median(x, axis=0)) / np.where(sd > 0, sd, 1.0)
+        row = x[int(np.argmin((z ** 2).sum(axis=1)))]
+        return {n: float(10 ** v) for n, v in zip(self.names, row)}
+
     def correlation(self) -> np.ndarray:
         """Correlation matrix of the log10 samples (P, P)."""
         if self.samples.shape[1] == 1:

@@ -2,16 +2,18 @@
 
 :func:`identify` packs the RVEs and fits the reduced bases of the single-filler
 formulations over the whole prior box and calibrates them; then, as the paper's hierarchy,
-the two-filler formulations hold the single-filler parameters at their best values and
-their reduced bases vary only their own contact parameter (none under the gap
-parametrisation). The earlier stages' uncertainty enters a two-filler formulation's
-likelihood as the relative spread of its k_iso over :data:`CARRIED_DRAWS` posterior draws
-(full solves). Each group of models is calibrated once, its replicas are solved at the best
-values (the *anchor*: the replica factor and the RVE scatter there, see
-:meth:`identify.forward.ForwardModel.anchor_at`) and it is calibrated again; the last of
-these calibrations (over every model) is the result, and the paper's screening runs on the
-same models. Formulation names give the composition: a Table 2 name, or
-``<filler>-<vol%>`` and ``<filler>-<vol%>-<filler>-<vol%>`` (e.g. ``Al2O3-62``).
+the two-filler formulations hold the single-filler parameters at a central point of
+their posterior (:meth:`identify.calibrate.Posterior.central`, not the best grid point,
+which can lie far out on a ridge the single-filler data leave) and their reduced bases vary
+only their own contact parameter (none under the gap parametrisation). The earlier stages'
+uncertainty enters a two-filler formulation's likelihood as the relative spread of its
+k_iso over :data:`CARRIED_DRAWS` posterior draws (full solves). Each group of models is
+calibrated once, its replicas are solved at the best values (the *anchor*: the replica
+factor and the RVE scatter there, see :meth:`identify.forward.ForwardModel.anchor_at`) and
+it is calibrated again; the last of these calibrations (over every model) is the result,
+and the paper's screening runs on the same models. Formulation names give the composition:
+a Table 2 name, or ``<filler>-<vol%>`` and ``<filler>-<vol%>-<filler>-<vol%>`` (e.g.
+``Al2O3-62``).
 """
 
 from __future__ import annotations
@@ -90,6 +92,13 @@ class Identification:
                 out[f] = (self.measurements.mean(f), float(k[0]), float(v[0]))
         return out
 
+    def held(self) -> dict[str, dict]:
+        """Per two-filler formulation: the single-filler parameters it is held at
+        (``held_at``, m^2 K/W: the earlier posterior's central point) and the relative
+        spread of its k_iso over that posterior (``carried_scatter``)."""
+        return {f: {"held_at": dict(m.fixed), "carried_scatter": m.carried_scatter}
+                for f, m in self.models.items() if m.fixed}
+
     def chi_square(self) -> float:
         """Sum over formulations of (measured - model)^2 / variance at the best values."""
         return float(sum((m - k) ** 2 / v for m, k, v in self.residuals().values()))
@@ -149,9 +158,10 @@ def identify(measurements: Measurements, parametrisation: str = "gap", *,
     post = _anchored(models, singles, measurements, grid_points, seed) if singles else None
     seconds["single-filler calibration and anchors"] = time.perf_counter() - t
     t = time.perf_counter()
+    central = post.central() if post is not None else {}
     for f in multis:
         params = par.parameters(list(comps[f]))
-        fixed = {p: post.best[p] for p in params if post is not None and p in post.names}
+        fixed = {p: central[p] for p in params if p in central}
         models[f] = _build(f, comps[f], par, settings, fixed, progress, echo)
         if fixed:
             models[f].carried_scatter = _carried_scatter(models[f], post, seed)

@@ -48,7 +48,7 @@ def identified_dict(ident: Identification) -> dict:
             **post,
             "chi_square": ident.chi_square(), "formulations": len(ident.models),
             "bic": ident.bic(), "settings": ident.settings.to_dict(),
-            "seconds": ident.seconds}
+            "two_filler_held": ident.held(), "seconds": ident.seconds}
 
 
 def selection(idents: Mapping[str, Identification]) -> dict:
@@ -225,6 +225,15 @@ def settings_lines(idents: Mapping[str, Identification], extra: Mapping[str, obj
     for par, i in idents.items():
         c = next(iter(i.models.values())).parametrisation
         lines.append(f"- parametrisation {par}: {c.description}")
+        held = i.held()
+        if held:
+            point = next(iter(held.values()))["held_at"]
+            spread = [100 * h["carried_scatter"] for h in held.values()]
+            lines.append("  - two-filler formulations held at the single-filler posterior's "
+                         "central point (the sample nearest the medians): "
+                         + ", ".join(f"{n} {v:.2e}" for n, v in point.items())
+                         + f"; their k_iso spread over that posterior {min(spread):.1f}-"
+                         f"{max(spread):.1f} % (in the likelihood)")
     lines += [f"- {k}: {v}" for k, v in extra.items()]
     return lines
 

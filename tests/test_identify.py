@@ -148,6 +148,27 @@ def test_area_parametrisation_reports_what_the_data_cannot_separate(table3):
     assert "determined" in st["directions"][0]
 
 
+def test_central_point_stays_on_a_bent_ridge_and_off_its_far_end():
+    """A posterior spread evenly along a half circle of radius 2 in (log10 R, log10 Rff)
+    with the best grid point at one end (a ridge's end the data allow): the central point
+    is a sample, on the arc (the marginal medians are not: the median of each coordinate
+    falls inside the circle), and in the middle of the ridge, not at the best point."""
+    from identify.calibrate import Posterior
+
+    rng = np.random.default_rng(4)
+    t = rng.uniform(0, np.pi, 4000)
+    x = np.stack([-7 + 2 * np.cos(t), -9 + 2 * np.sin(t)], axis=1)
+    post = Posterior(["R_a_b", "Rff_a_a"], x, {"R_a_b": 1e-9, "Rff_a_a": 1e-9}, (1e-9, 1e-5))
+    centre = np.array([-7.0, -9.0])
+    assert np.hypot(*(np.median(x, axis=0) - centre)) < 1.6     # the medians: off the arc
+    c = post.central()
+    point = np.log10([c["R_a_b"], c["Rff_a_a"]])
+    assert np.min(np.abs(x - point).sum(axis=1)) < 1e-9          # a sample
+    assert abs(np.hypot(*(point - centre)) - 2) < 1e-9           # on the arc
+    angle = np.arctan2(point[1] - centre[1], point[0] - centre[0])
+    assert np.pi / 4 < angle < 3 * np.pi / 4                     # the middle, not an end
+
+
 def test_stages_follow_the_papers_hierarchy():
     fake = {f: ForwardModel(f, fractions_of(f), PARAMETRISATIONS["area"], SMALL)
             for f in ("Al2O3-60", "AlN-60", "Al2O3-30-AlN-30")}

@@ -82,6 +82,17 @@ def test_reproduce_end_to_end_at_tiny_size(tmp_path):
             assert p["interval_90"][0] <= p["best"] * 1.2 and p["unit"] == "m^2 K/W"
     assert set(data["gap"]["parameters"]) == {"R_Al2O3_silicone", "R_AlN_silicone"}
     assert "Rff_Al2O3_AlN" in data["area"]["parameters"]
+    for par in ("area", "gap"):
+        # the four hybrids are held at one point of the single-filler posterior, inside
+        # its 90 % intervals, and carry a spread over that posterior
+        held = data[par]["two_filler_held"]
+        assert len(held) == 4
+        for h in held.values():
+            assert h["held_at"] == next(iter(held.values()))["held_at"]
+            assert h["carried_scatter"] > 0
+            for name, v in h["held_at"].items():
+                lo, hi = data[par]["parameters"][name]["interval_90"]
+                assert lo <= v <= hi
     assert data["selection"]["bic"].keys() == {"area", "gap"}
     report = (out / "report.md").read_text()
     for heading in ("Table 1", "Table 3", "Table 5", "Table 6", "Leave one formulation out",

@@ -89,11 +89,14 @@ def main() -> None:
 
     settings = ReproduceSettings().forward
     table3 = read_measurements()
-    results = {}
+    out = Path(args.out)
+    # a run of some parametrisations keeps the others' results from an earlier run
+    old = out.with_suffix(".json")
+    results = json.loads(old.read_text()) if old.exists() else {}
     for par in args.parametrisations.split(","):
         t0 = time.perf_counter()
         runs = []
-        k_true = truth(par, settings, Path(args.out).with_name("identification_truth.json"))
+        k_true = truth(par, settings, out.with_name("identification_truth.json"))
         for seed in range(args.seeds):
             rng = np.random.default_rng(1000 + seed)
             meas = Measurements({f: k + math.sqrt(table3.variance(f)) * rng.standard_normal(4)
@@ -112,8 +115,8 @@ def main() -> None:
                   flush=True)
             results[par] = {"truth_k_iso": k_true, "runs": runs,
                             "seconds": time.perf_counter() - t0}
-            write(results, Path(args.out), args.seeds)   # after every seed: a kill loses one
-    print(f"wrote {Path(args.out).with_suffix('.md')}")
+            write(results, out, args.seeds)   # after every seed: a kill loses one
+    print(f"wrote {out.with_suffix('.md')}")
 
 
 def _atomic_write(path: Path, text: str) -> None:
