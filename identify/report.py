@@ -253,6 +253,14 @@ def residual_lines(idents: Mapping[str, Identification]) -> list[str]:
     return lines
 
 
+#: Which of the numbered reasons of :func:`difference_lines` bear on a parameter, by
+#: (parametrisation, kind): the voxel (1) only where the model is tied to it or biased by
+#: it, the ridge (3) only under the per-area model, the missing contact resistance (5) only
+#: under the gap model.
+_REASONS = {("area", "R"): (2, 3, 4), ("area", "Rff"): (1, 2, 3, 4),
+            ("gap", "R"): (1, 2, 4, 5)}
+
+
 def difference_lines(idents: Mapping[str, Identification]) -> list[str]:
     """Each identified value against the paper's Table 5, with the reasons that apply."""
     lines = ["| parameter | parametrisation | ours (best) / paper | paper's value inside our "
@@ -274,11 +282,13 @@ def difference_lines(idents: Mapping[str, Identification]) -> list[str]:
             if kind == "Rff":
                 remarks.append("per-area contact value: belongs to our voxel, not the paper's "
                                "0.1 um")
+            reasons = _REASONS.get((par, kind), range(1, 6))
+            remarks.append("reasons " + ", ".join(str(r) for r in reasons) + " below")
             lines.append(f"| {n} | {par} | {ident.posterior.best[n] / paper:.2g} | "
                          f"{'yes' if lo <= paper <= hi else 'no'} | {'; '.join(remarks)} |")
     s = next(iter(idents.values())).settings
     cut = box_cut(s)
-    lines += ["", "Reasons that apply to every difference:", "",
+    lines += ["", "Reasons for the differences (numbered in the remarks):", "",
               f"1. Voxel: {s.voxel_um:g} um against the paper's 0.1 um. Under the per-area "
               "model the faces two touching voxelized spheres share grow with the voxel, so a "
               "per-area contact resistance is a property of the voxel it was identified at "

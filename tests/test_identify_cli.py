@@ -98,6 +98,10 @@ def test_reproduce_end_to_end_at_tiny_size(tmp_path):
     for heading in ("Table 1", "Table 3", "Table 5", "Table 6", "Leave one formulation out",
                     "Identifiability"):
         assert heading in report
+    # every identified value against the paper's Table 5 names the reasons that bear on it
+    against = report.split("### Against the paper's Table 5")[1].split("\n\n")[1]
+    rows = against.splitlines()[2:]
+    assert len(rows) == 7 and all("reasons " in r for r in rows)
     solves = pq.read_table(out / "full_solves.parquet").to_pydict()
     assert set(solves["purpose"]) >= {"reduced basis", "RVE scatter", "validation"}
     # insulating corners of the reduced-basis box (R = 1e-5) fall below the matrix, 0.18
