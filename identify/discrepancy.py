@@ -39,9 +39,11 @@ from scipy import stats
 from scipy.interpolate import RegularGridInterpolator
 from scipy.special import logsumexp
 
-from .effects import Effect, default_effects
+from itr_fv import Materials
 from itr_fv.parameters import parameter_name
+from itr_fv.problem import DiscreteProblem
 
+from .effects import Effect, default_effects
 from .forward import MATRIX, PARAMETRISATIONS, ForwardModel, ForwardSettings, full_solve
 from .measurements import Measurements
 
@@ -208,13 +210,19 @@ def build_tables(fractions: dict[str, dict[str, float]], *,
     base, table, factor, scatter = {}, {e.name: {} for e in effects}, {}, {}
     n = 0
 
-    def solve(ms, mat) -> float:
+    def solve_grid(ms, materials_at: Callable[[float], Materials]) -> np.ndarray:
+        """k_iso (W/(m K)) of ``ms`` over the resistance grid; the geometry is built once
+        (at 24^3 it costs several times the solve)."""
         nonlocal n
-        n += 1
-        k = float(full_solve(ms, mat, s.solver_tol).mean())
-        if tick is not None:
-            tick()
-        return k
+        problem, out = None, []
+        for R in settings.r_grid_m2K_per_W:
+            mat = materials_at(R)
+            problem = problem or DiscreteProblem.for_materials(ms, mat)
+            out.append(float(full_solve(problem, mat, s.solver_tol).mean()))
+            n += 1
+            if tick is not None:
+                tick()
+        return np.array(out)
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -230,8 +238,7 @@ def build_tables(fractions: dict[str, dict[str, float]], *,
             n += len(model.microstructures)
             factor[f], scatter[f] = model.replica_factor, model.rve_scatter
             ms0 = model.microstructures[0]
-            base[f] = np.array([solve(ms0, model.materials({r_name: R}))
-                                for R in settings.r_grid_m2K_per_W])
+            base[f] = solve_grid(ms0, lambda R: model.materials({r_name: R}))
             for e in effects:
                 cols = []
                 for theta in e.values:
@@ -239,9 +246,8 @@ def build_tables(fractions: dict[str, dict[str, float]], *,
                         cols.append(base[f])
                         continue
                     ms = e.microstructure(ms0, theta, seed=s.seed)
-                    cols.append(np.array([solve(ms, e.materials(model.materials({r_name: R}),
-                                                                theta))
-                                          for R in settings.r_grid_m2K_per_W]))
+                    cols.append(solve_grid(ms, lambda R: e.materials(
+                        model.materials({r_name: R}), theta)))
                 table[e.name][f] = np.stack(cols, axis=1)          # (nR, ntheta)
     return ForwardTables(settings, effects, base, table, factor, scatter, n,
                          time.perf_counter() - t0)

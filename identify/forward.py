@@ -139,9 +139,10 @@ def _specs(fractions: Mapping[str, float]) -> list[FillerSpec]:
 
 
 def full_solve(ms, materials: Materials, tol: float) -> np.ndarray:
-    """Diagonal of k_eff (3,), W/(m K), by itr_fft (three load cases). The per-area contact
-    model's VoxelContactWarning is silenced: that parametrisation is tied to its voxel on
-    purpose (the report says so)."""
+    """Diagonal of k_eff (3,), W/(m K), by itr_fft (three load cases) of ``ms``, a
+    Microstructure or its :class:`~itr_fv.problem.DiscreteProblem` (geometry built once for
+    many solves). The per-area contact model's VoxelContactWarning is silenced: that
+    parametrisation is tied to its voxel on purpose (the report says so)."""
     import itr_fft
     from itr_fv.checks import VoxelContactWarning
 
