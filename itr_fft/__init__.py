@@ -1,12 +1,14 @@
-"""itr_fft: FFT-preconditioned CG solver of the discrete model of :mod:`itr_fv.model`.
+"""itr_fft: FFT-preconditioned CG backends of the discrete model of :mod:`itr_fv.model`.
 
 Public API::
 
     import itr_fft
     res = itr_fft.homogenize(ms, mat, tol=1e-8)       # same signature/result as itr_fv
 
-Solver choice lives in the campaign layer (:mod:`surrogate.solver_choice`): this package
-imports the discrete problem from ``itr_fv``, never its solver.
+Importing the package registers two backends of :func:`itr_fv.solve.homogenize`:
+``"itr_fft"`` (:mod:`itr_fft.numba_backend`, fused numba kernels, the fast one) and
+``"scipy_fft"`` (:mod:`itr_fft.scipy_backend`, plain numpy/scipy). This package imports the
+discrete problem, the driver and CG from ``itr_fv``, never its solver.
 
 Importing the package sets ``OMP_WAIT_POLICY=PASSIVE`` unless the caller set it: numba's
 OpenMP threads otherwise spin at every barrier, and on a machine shared with other jobs
@@ -18,6 +20,14 @@ import os as _os
 
 _os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
-from .solver import FLOAT32_MIN_TOL, float32_min_tol, homogenize, reference_conductance
+from .numba_backend import (
+    FLOAT32_MIN_TOL,
+    NumbaFFTBackend,
+    float32_min_tol,
+    reference_conductance,
+)
+from .scipy_backend import ScipyFFTBackend
+from .solver import homogenize
 
-__all__ = ["homogenize", "reference_conductance", "FLOAT32_MIN_TOL", "float32_min_tol"]
+__all__ = ["homogenize", "reference_conductance", "FLOAT32_MIN_TOL", "float32_min_tol",
+           "NumbaFFTBackend", "ScipyFFTBackend"]

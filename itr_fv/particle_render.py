@@ -7,12 +7,9 @@ from collections.abc import Mapping
 import numpy as np
 
 from .microstructure import Microstructure
+from .offscreen import DEFAULT_COLORS, PALETTE, offscreen_plotter
 
-__all__ = ["render_particles", "DEFAULT_COLORS", "PALETTE"]
-
-#: Colours of the paper's Fig. 4 (Al2O3 red, AlN blue); other phases cycle through a palette.
-DEFAULT_COLORS: dict[str, str] = {"Al2O3": "red", "AlN": "blue"}
-PALETTE = ("orange", "green", "purple", "gold", "cyan", "magenta", "brown")
+__all__ = ["render_particles"]
 
 
 def render_particles(ms: Microstructure, path: str, colors: Mapping[str, str] | None = None,
@@ -48,7 +45,6 @@ def render_particles(ms: Microstructure, path: str, colors: Mapping[str, str] | 
     import pyvista as pv
 
     from .io import atomic_path, output_file
-    from .vtk_output import offscreen_plotter
 
     output_file(path, ".png")
     if ms.particles is None or len(ms.particles) == 0:

@@ -1,24 +1,14 @@
 """Memory guard: estimate a solve's peak memory before it starts, refuse what cannot fit.
 
 Without it a 400^3 RVE given to the FV solver ran for 31 s and died in the operator assembly
-with a MemoryError at 7.6 GB. The estimates are linear in the number of voxels N, with
-per-voxel costs measured as peak resident memory over a fresh interpreter (ru_maxrss minus
-the memory held before the solve, dense 60 % Al2O3 RVE, three load cases, store_fields=False;
-``validation/results/memory.md``, written by ``validation/bench_memory.py``):
-
-========================  ====================
-solver, vectors            bytes per voxel
-========================  ====================
-itr_fv (pyamg, classical)  ``FV_BYTES_PER_VOXEL``
-itr_fft, float64           ``FFT64_BYTES_PER_VOXEL``
-itr_fft, float32           ``FFT32_BYTES_PER_VOXEL``
-========================  ====================
-
-plus ``FIELD_BYTES_PER_VOXEL_CASE`` per load case when the fields are kept
-(``store_fields=True``: theta, temperature and three face fluxes in float64). Measured: FV
-1109-1236, FFT float64 89-101, FFT float32 93-106 bytes per voxel (64^3 to 192^3). float32
-vectors do not lower the FFT solver's peak: it is reached while the float64 face
-conductances and the geometry are built.
+with a MemoryError at 7.6 GB. The estimates are linear in the number of voxels N: each
+backend states its measured peak bytes per voxel
+(:meth:`itr_fv.backends.Backend.bytes_per_voxel`, measured as peak resident memory over a
+fresh interpreter, dense 60 % Al2O3 RVE, three load cases, store_fields=False;
+``validation/results/memory.md``, written by ``validation/bench_memory.py``), plus
+``FIELD_BYTES_PER_VOXEL_CASE`` per load case when the fields are kept
+(``store_fields=True``: theta, temperature and three face fluxes in float64). This module
+knows no backend by name: it asks the registry.
 """
 
 from __future__ import annotations
@@ -26,15 +16,14 @@ from __future__ import annotations
 import math
 import os
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .backends import Backend
 
 __all__ = ["InsufficientMemoryError", "available_memory", "estimate_peak_memory",
-           "check_memory", "FV_BYTES_PER_VOXEL", "FFT64_BYTES_PER_VOXEL",
-           "FFT32_BYTES_PER_VOXEL", "FIELD_BYTES_PER_VOXEL_CASE"]
+           "check_memory", "FIELD_BYTES_PER_VOXEL_CASE"]
 
-#: Measured peak bytes per voxel of each solver (see the module docstring), rounded up.
-FV_BYTES_PER_VOXEL = 1250
-FFT64_BYTES_PER_VOXEL = 110
-FFT32_BYTES_PER_VOXEL = 110  # measured 93-106: the set-up (float64 conductances) sets the peak
 #: theta + temperature (8 B each) and three face fluxes (24 B) per load case, plus the
 #: temporaries of the flux computation.
 FIELD_BYTES_PER_VOXEL_CASE = 64
@@ -107,17 +96,27 @@ def available_memory() -> int | None:
         return None
 
 
-def estimate_peak_memory(shape: Sequence[int], solver: str, *, dtype: str = "float64",
-                         store_fields: bool = True, load_cases: int = 3) -> int:
+def _backend(solver: "str | Backend", dtype: str | None) -> "Backend":
+    from .backends import backend_for  # the registry, not any backend
+    if dtype is None or not isinstance(solver, str):
+        return backend_for(solver)
+    return backend_for(solver, dtype=str(dtype))
+
+
+def estimate_peak_memory(shape: Sequence[int], solver: "str | Backend", *,
+                         dtype: str | None = None, store_fields: bool = True,
+                         load_cases: int = 3) -> int:
     """Estimated peak memory of one homogenization, bytes.
 
     Parameters
     ----------
     shape : (n1, n2, n3)
         Voxel grid.
-    solver : {"itr_fv", "itr_fft"}
-    dtype : {"float64", "float32"}
-        CG vector precision (itr_fft only).
+    solver : str or Backend
+        A backend name (:func:`itr_fv.backends.available_backends`) or a configured backend;
+        its :meth:`~itr_fv.backends.Backend.bytes_per_voxel` is the measured cost.
+    dtype : {"float64", "float32"}, optional
+        CG vector precision, for a named backend that has this option.
     store_fields : bool
         Whether the result keeps the fields.
     load_cases : int
@@ -128,12 +127,10 @@ def estimate_peak_memory(shape: Sequence[int], solver: str, *, dtype: str = "flo
     int
     """
     n = math.prod(int(s) for s in shape)
-    if solver == "itr_fv":
-        per = FV_BYTES_PER_VOXEL
-    elif solver == "itr_fft":
-        per = FFT32_BYTES_PER_VOXEL if str(dtype) == "float32" else FFT64_BYTES_PER_VOXEL
-    else:
-        raise ValueError(f"solver: expected 'itr_fv' or 'itr_fft', got {solver!r}")
+    try:
+        per = _backend(solver, dtype).bytes_per_voxel()
+    except ValueError as err:
+        raise ValueError(f"solver: {err}") from None
     if store_fields:
         per += FIELD_BYTES_PER_VOXEL_CASE * int(load_cases)
     return int(n * per)
@@ -143,7 +140,7 @@ def _gb(b: float) -> str:
     return f"{b / 1e9:.1f} GB"
 
 
-def check_memory(shape: Sequence[int], solver: str, *, dtype: str = "float64",
+def check_memory(shape: Sequence[int], solver: "str | Backend", *, dtype: str | None = None,
                  store_fields: bool = True, load_cases: int = 3,
                  available: int | None = None) -> int:
     """Refuse a solve whose estimated peak exceeds the available memory.
@@ -163,29 +160,36 @@ def check_memory(shape: Sequence[int], solver: str, *, dtype: str = "float64",
     Raises
     ------
     InsufficientMemoryError
-        With the estimate, the available memory and the options that would fit; pass
-        ``check_memory=False`` to the solver to go ahead anyway.
+        With the estimate, the available memory and the cheapest registered backend that
+        would fit; pass ``check_memory=False`` to the solver to go ahead anyway.
     """
-    est = estimate_peak_memory(shape, solver, dtype=dtype, store_fields=store_fields,
-                               load_cases=load_cases)
+    from .backends import available_backends, backend_for
+
+    chosen = _backend(solver, dtype)
+    est = estimate_peak_memory(shape, chosen, store_fields=store_fields, load_cases=load_cases)
     avail = available_memory() if available is None else int(available)
     if avail is None or est <= HEADROOM * avail:
         return est
-    candidates = [("itr_fft", "float64", store_fields), ("itr_fft", "float64", False)]
+    label = f"{chosen.name}" + "".join(f", {k}={v}" for k, v in chosen.options().items()
+                                       if k == "dtype")
     options = []
-    for cand in dict.fromkeys(candidates):  # keeps order, drops repeats
-        if cand == (solver, str(dtype), store_fields):
-            continue
-        e = estimate_peak_memory(shape, cand[0], dtype=cand[1], store_fields=cand[2],
-                                 load_cases=load_cases)
-        if e <= HEADROOM * avail:
-            extra = "" if cand[2] else ", store_fields=False"
-            options.append(f"{cand[0]} with dtype={cand[1]}{extra} (~{_gb(e)})")
-            break
+    others = sorted((backend_for(name) for name in available_backends()),
+                    key=lambda b: b.bytes_per_voxel())
+    for other in others[:1]:
+        for keep in dict.fromkeys((store_fields, False)):
+            if other.name == chosen.name and keep == store_fields:
+                continue
+            e = estimate_peak_memory(shape, other, store_fields=keep, load_cases=load_cases)
+            if e <= HEADROOM * avail:
+                extra = "" if keep else ", store_fields=False"
+                opts = "".join(f" with {k}={v}" for k, v in other.options().items()
+                               if k == "dtype")
+                options.append(f"{other.name}{opts}{extra} (~{_gb(e)})")
+                break
     hint = ("; would fit: " + "; ".join(options)) if options else \
         "; no solver fits: use a coarser voxel or a smaller box"
     grid = "x".join(str(int(s)) for s in shape)
     raise InsufficientMemoryError(
-        f"memory: {solver} ({dtype}) on a {grid} grid needs ~{_gb(est)} but {_gb(avail)} is "
+        f"memory: {label} on a {grid} grid needs ~{_gb(est)} but {_gb(avail)} is "
         f"available{hint}; pass check_memory=False to try anyway",
         est, avail)

@@ -5,24 +5,34 @@ Files are written atomically (:mod:`itr_fv.io`): a killed write leaves no trunca
 
 from __future__ import annotations
 
-import ctypes.util
-import os
-import sys
 from collections.abc import Sequence
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
 from .io import atomic_path, output_file
-from .particle_render import DEFAULT_COLORS, PALETTE
+from .offscreen import DEFAULT_COLORS, PALETTE, offscreen_plotter
 
 if TYPE_CHECKING:  # pragma: no cover
     import pyvista
 
-    from .result import HomogenizationResult
 
-__all__ = ["to_image_data", "write_vti", "render_png", "cell_flux", "offscreen_plotter"]
+class FieldResult(Protocol):
+    """What this module reads of a :class:`~itr_fv.result.HomogenizationResult` (named
+    structurally, so that the result may import this module and not the other way round)."""
+
+    k_eff: np.ndarray
+    directions: tuple[int, ...]
+    temperature: np.ndarray | None
+    theta: np.ndarray | None
+    fluxes: np.ndarray | None
+    microstructure: Any
+    solver: str
+    info: dict
+
+
+__all__ = ["to_image_data", "write_vti", "render_png", "cell_flux", "FieldResult"]
 
 
 def cell_flux(fluxes: np.ndarray) -> np.ndarray:
@@ -41,7 +51,7 @@ def cell_flux(fluxes: np.ndarray) -> np.ndarray:
                     axis=-1)
 
 
-def _case_indices(result: "HomogenizationResult", load_cases: Sequence[int] | None) -> list[int]:
+def _case_indices(result: FieldResult, load_cases: Sequence[int] | None) -> list[int]:
     n = len(result.directions)
     if load_cases is None:
         return list(range(n))
@@ -55,7 +65,7 @@ def _case_indices(result: "HomogenizationResult", load_cases: Sequence[int] | No
     return cases
 
 
-def to_image_data(result: "HomogenizationResult", *, load_cases: Sequence[int] | None = None,
+def to_image_data(result: FieldResult, *, load_cases: Sequence[int] | None = None,
                   vectors: bool = True, precision: str = "float32") -> "pyvista.ImageData":
     """pyvista ImageData of the microstructure and the fields of the chosen load cases.
 
@@ -117,7 +127,7 @@ def to_image_data(result: "HomogenizationResult", *, load_cases: Sequence[int] |
     return grid
 
 
-def write_vti(result: "HomogenizationResult", path: str | Path, *,
+def write_vti(result: FieldResult, path: str | Path, *,
               load_cases: Sequence[int] | None = None, vectors: bool = True,
               precision: str = "float32") -> Path:
     """Write the fields of ``result`` as a zlib-compressed VTK XML image; returns the path.
@@ -137,34 +147,12 @@ def write_vti(result: "HomogenizationResult", path: str | Path, *,
     return path
 
 
-def _use_egl_without_display() -> None:
-    """Off-screen VTK without an X display: choose the EGL window up front.
-
-    VTK otherwise tries X first and prints "bad X server connection" before falling back.
-    Left alone where the user chose a window class, where a display exists, or where no EGL
-    library is installed.
-    """
-    if (sys.platform.startswith("linux") and not os.environ.get("DISPLAY")
-            and not os.environ.get("WAYLAND_DISPLAY")
-            and "VTK_DEFAULT_OPENGL_WINDOW" not in os.environ
-            and ctypes.util.find_library("EGL")):
-        os.environ["VTK_DEFAULT_OPENGL_WINDOW"] = "vtkEGLRenderWindow"
-
-
-def offscreen_plotter(**kwargs) -> "pyvista.Plotter":
-    """A pyvista Plotter rendering off screen (no display needed, no X warnings)."""
-    import pyvista as pv
-
-    _use_egl_without_display()
-    return pv.Plotter(off_screen=True, **kwargs)
-
-
 def _phase_colours(names: Sequence[str]) -> list[str]:
     extra = iter(PALETTE)
     return [DEFAULT_COLORS.get(n) or next(extra, "grey") for n in names]
 
 
-def render_png(result: "HomogenizationResult", path: str | Path, load_case: int = 0,
+def render_png(result: FieldResult, path: str | Path, load_case: int = 0,
                window_size: tuple[int, int] = (1600, 800)) -> Path:
     """Off-screen figure of one load case: heat-flux magnitude with the interfaces, and phases.
 

@@ -7,7 +7,7 @@ one grid step (2.0e-8 ... 2.9e-8 m^2 K/W) leaves XGBoost's prediction unchanged,
 tree ensemble is piecewise constant between the training values.
 
 :func:`make_baseline` builds each as a scikit-learn estimator on the same features as
-:class:`~surrogate.prototype.PrototypeRegressor` (flat parameter names; resistances on a
+:class:`~itr_surrogate.prototype.PrototypeRegressor` (flat parameter names; resistances on a
 log10 scale, every feature and the target standardised), so that one train/test split
 serves all. The models live for a study; they are not saved (the surrogates a user loads
 are the prototype model's JSON and the reduced basis's npz).

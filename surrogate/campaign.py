@@ -10,7 +10,7 @@ starts; an error names the key. The file::
     replicas = 2                   # RVEs per formulation (seeds seed, seed + 1, ...)
     seed = 1
     contact = "gap"                # "gap" (default) or "area" (the paper's per-area R_ff)
-    solver = "fft"                 # "fft" (default), "fv" or "auto"
+    solver = "fft"                 # "fft" (default), "fv", "auto" or a backend name
     tol = 1e-6                     # relative residual of every solve
     block_size = 8                 # parameter sets per task (one RVE geometry per task)
     max_diameter_box_ratio = 0.45  # largest particle diameter / box
@@ -38,7 +38,7 @@ starts; an error names the key. The file::
 Parameter names are the package's flat names (:mod:`itr_fv.parameters`). A task is one RVE
 (formulation, replica) with one block of consecutive parameter sets: the runner builds the
 RVE and its discrete problem once per task and warm-starts every solve from the nearest
-solved set (:mod:`surrogate.runner`).
+solved set (:mod:`itr_surrogate.runner`).
 """
 
 from __future__ import annotations
@@ -60,6 +60,7 @@ from itr_fv.rve import FillerSpec, packing_limit
 
 from . import design as designs
 from . import paper_data
+from .solver_choice import check_solver
 
 __all__ = ["Campaign", "Formulation", "Task", "CampaignError", "PAPER_BASE", "nearest_solved"]
 
@@ -187,8 +188,10 @@ class Campaign:
         _whole(self.seed, "seed", 0)
         if self.contact not in ("gap", "area"):
             raise CampaignError(f"contact: expected 'gap' or 'area', got {self.contact!r}")
-        if self.solver not in ("fft", "fv", "auto"):
-            raise CampaignError(f"solver: expected 'fft', 'fv' or 'auto', got {self.solver!r}")
+        try:
+            check_solver(self.solver)
+        except ValueError as err:
+            raise CampaignError(str(err)) from None
         if not (isinstance(self.tol, (int, float)) and 1e-12 <= self.tol < 1):
             raise CampaignError(f"tol: expected a relative residual in [1e-12, 1), got "
                                 f"{self.tol!r}")

@@ -22,7 +22,7 @@ def table_text(name: str) -> str:
     """The CSV text of the shipped table ``name`` (one of :data:`TABLES`)."""
     if name not in TABLES:
         raise ValueError(f"name: expected one of {TABLES}, got {name!r}")
-    return resources.files("surrogate").joinpath("data", f"{name}.csv").read_text()
+    return resources.files("itr_surrogate").joinpath("data", f"{name}.csv").read_text()
 
 
 def read_table(name: str) -> list[dict[str, str]]:

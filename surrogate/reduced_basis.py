@@ -12,7 +12,7 @@ principles of the same discrete model (``N`` voxels of edge ``h``, faces ``f``):
   ``r = 1/g``; ``m_i`` are the mean fluxes. Taking ``Phi`` from the full solutions' fluxes
   gives a lower bound ``K_low``.
 
-The face resistances are affine in ``rho = (1/k, R)`` (:mod:`surrogate.face_decomposition`),
+The face resistances are affine in ``rho = (1/k, R)`` (:mod:`itr_surrogate.face_decomposition`),
 so ``H`` is affine exactly; the conductances of interface and contact faces are not, and are
 replaced by an empirical interpolation with a measured relative error ``eps`` (then
 ``(1 + eps) K_N`` is still an upper bound, since K is monotone in every g). The gap
@@ -35,7 +35,7 @@ import json
 import math
 import time
 import warnings
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -55,6 +55,7 @@ from .face_decomposition import (
     interpolation_coefficients,
 )
 from .reduced_kernels import galerkin_tensors
+from .solver_choice import check_solver, solver_backend
 
 __all__ = ["ReducedBasis", "ReducedBasisWarning"]
 
@@ -134,8 +135,9 @@ class ReducedBasis:
         Parameter sets of the greedy's training set (plus the 2^P corners of the box).
     seed : int
         Seed of the training and check sets.
-    solver : {"fft", "fv"}
-        Full solver of the snapshots (``itr_fft`` or ``itr_fv``).
+    solver : str
+        Full solver of the snapshots: ``"fft"``, ``"fv"``, ``"auto"`` or a backend name
+        (:mod:`surrogate.solver_choice`).
     solver_tol : float
         Relative residual of the full solves.
     interpolation_tol : float, optional
@@ -215,8 +217,7 @@ class ReducedBasis:
                                  ("seed", self.seed, 0)):
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
                 raise ValueError(f"{name}: expected a whole number >= {low}, got {value!r}")
-        if self.solver not in ("fft", "fv"):
-            raise ValueError(f"solver: expected 'fft' or 'fv', got {self.solver!r}")
+        check_solver(self.solver)
         if isinstance(self.ms, DiscreteProblem):
             problem = self.ms
         elif isinstance(self.ms, Microstructure):
@@ -230,8 +231,19 @@ class ReducedBasis:
         return problem
 
     # --------------------------------------------------------------------- fit
-    def fit(self) -> "ReducedBasis":
-        """Greedy construction from full solves; returns self."""
+    def fit(self, *, full_solve: Callable | None = None) -> "ReducedBasis":
+        """Greedy construction from full solves; returns self.
+
+        Parameters
+        ----------
+        full_solve : callable, optional
+            ``full_solve(problem, materials)`` returning an object with ``theta`` (one field
+            per load case) and ``k_eff_energy`` (W/(m K)): how each snapshot is solved, e.g.
+            through the solve engine (:mod:`surrogate.engine`) so that its snapshots are
+            kept and reused. Default: :func:`itr_fv.solve.homogenize` on the backend of
+            ``solver``. The greedy's choice depends only on the snapshots, so the same
+            snapshots give the same model.
+        """
         t0 = time.perf_counter()
         problem = self._check_params()
         box = ParameterBox(self.bounds, self.materials)
@@ -247,7 +259,7 @@ class ReducedBasis:
                                        max_terms=self.max_interpolation_terms)
         self._setup(box, dec, eim, h, N)
         builder = _Builder(self, dec, eim, shape, h, problem)
-        solve = self._full_solver()
+        solve = self._full_solver() if full_solve is None else full_solve
         mu_values = box.from_unit(np.full(box.size, 0.5))
         history = []
         bar = None
@@ -297,16 +309,11 @@ class ReducedBasis:
         return self.interpolation_tol
 
     def _full_solver(self):
-        if self.solver == "fft":
-            import itr_fft
+        from itr_fv.solve import homogenize
 
-            def solve(problem, mat):
-                return itr_fft.homogenize(problem, mat, tol=self.solver_tol)
-        else:
-            import itr_fv
-
-            def solve(problem, mat):
-                return itr_fv.homogenize(problem, mat, tol=self.solver_tol)
+        def solve(problem, mat):
+            backend = solver_backend(self.solver, problem.shape)
+            return homogenize(problem, mat, backend=backend, tol=self.solver_tol)
         return solve
 
     def _setup(self, box: ParameterBox, dec: ResistanceDecomposition,

@@ -1,11 +1,11 @@
 """Run a campaign on dask.distributed: a LocalCluster by default, or an existing scheduler.
 
-A task (:class:`~surrogate.campaign.Task`) is one RVE and a block of parameter sets. On a
+A task (:class:`~itr_surrogate.campaign.Task`) is one RVE and a block of parameter sets. On a
 worker, :func:`run_task` packs and voxelizes the RVE (seeded: the same table every time),
 stores its particle table, builds its :class:`~itr_fv.problem.DiscreteProblem` once, and
 solves the block's parameter sets in order, each warm-started from the nearest set already
 solved in the task. The rows go to one Parquet part file, written atomically when the task
-is complete (:class:`~surrogate.store.CampaignStore`). The driver (:func:`run_campaign`)
+is complete (:class:`~itr_surrogate.store.CampaignStore`). The driver (:func:`run_campaign`)
 submits the tasks whose part file is missing, shows a progress bar, and records failures
 without stopping the others.
 
@@ -16,7 +16,6 @@ block from the same cold start.
 
 from __future__ import annotations
 
-import os
 import time
 import warnings
 from collections.abc import Callable
@@ -45,17 +44,10 @@ class RunSummary:
     workers: int
 
 
-def _solver(camp: Campaign) -> tuple[Callable, dict]:
-    """The campaign's homogenize function and the keyword arguments only it takes."""
-    solver = camp.solver
-    if solver == "auto":
-        from .solver_choice import choose_solver
-        solver = "fv" if choose_solver(camp.shape) == "itr_fv" else "fft"
-    if solver == "fv":
-        import itr_fv
-        return itr_fv.homogenize, {}
-    import itr_fft
-    return itr_fft.homogenize, {"workers": camp.threads_per_worker}
+def _backend(camp: Campaign):
+    """The campaign's solver backend (chosen in :mod:`surrogate.solver_choice`)."""
+    from .solver_choice import solver_backend
+    return solver_backend(camp.solver, camp.shape, threads=camp.threads_per_worker)
 
 
 def _build_rve(camp: Campaign, task: Task):
@@ -87,6 +79,7 @@ def run_task(campaign: dict, task: dict, folder: str) -> dict:
     """
     from itr_fv import __version__
     from itr_fv.problem import DiscreteProblem
+    from itr_fv.solve import homogenize
 
     t0 = time.perf_counter()
     camp = Campaign.from_dict(campaign)
@@ -100,7 +93,7 @@ def run_task(campaign: dict, task: dict, folder: str) -> dict:
                      "seed": task.seed, "box_um": camp.box_um, "voxel_um": camp.voxel_um,
                      "shape": list(ms.shape), "matrix": camp.matrix})
     problem = DiscreteProblem(ms, contact=camp.contact)
-    solve, options = _solver(camp)
+    backend = _backend(camp)
     sets = camp.parameter_sets(camp.formulation(task.formulation))
     solved, thetas, rows = [], [], []
     for i in task.set_indices:
@@ -108,8 +101,8 @@ def run_task(campaign: dict, task: dict, folder: str) -> dict:
         mat = camp.materials(pset)
         near = nearest_solved(pset, solved)
         t = time.perf_counter()
-        res = solve(problem, mat, tol=camp.tol, x0=None if near is None else thetas[near],
-                    **options)
+        res = homogenize(problem, mat, backend=backend, tol=camp.tol,
+                         x0=None if near is None else thetas[near])
         wall = time.perf_counter() - t
         solved.append(pset)
         thetas.append(np.stack(res.theta))
@@ -144,34 +137,19 @@ def worker_memory(camp: Campaign) -> int:
     limit)."""
     from itr_fv.resources import estimate_peak_memory
 
-    solver = "itr_fv" if camp.solver == "fv" else "itr_fft"
-    peak = estimate_peak_memory(camp.shape, solver, store_fields=True)
+    peak = estimate_peak_memory(camp.shape, _backend(camp), store_fields=True)
     fields = 3 * 8 * int(np.prod(camp.shape)) * camp.block_size
     return int(peak + fields + 1e9)
 
 
 def _client(workers: int | None, scheduler: str | None, camp: Campaign, echo: Callable):
     """A dask client on the scheduler, or on a new LocalCluster sized by memory."""
-    from dask.distributed import Client, LocalCluster
+    from .engine import open_client
 
-    if scheduler:
-        try:
-            return Client(scheduler, timeout="5s"), None
-        except (OSError, TimeoutError) as exc:
-            raise CampaignError(f"--scheduler: cannot reach {scheduler!r} ({exc})") from None
-    from itr_fv.resources import available_memory
-
-    need = worker_memory(camp)
-    avail = available_memory() or need
-    n = workers or max(1, min(os.cpu_count() or 1, 4))
-    fit = max(1, int(avail // need))
-    if fit < n:
-        echo(f"memory: {n} workers of {need / 1e9:.2f} GB do not fit in {avail / 1e9:.1f} GB; "
-             f"using {fit}")
-        n = fit
-    cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                           memory_limit=need, dashboard_address=None)
-    return Client(cluster), cluster
+    try:
+        return open_client(workers, scheduler, memory_per_worker=worker_memory(camp), echo=echo)
+    except ValueError as err:
+        raise CampaignError(str(err)) from None
 
 
 def run_campaign(campaign: Campaign, folder: str | Path, *, workers: int | None = None,

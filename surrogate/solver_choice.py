@@ -1,12 +1,16 @@
-"""Pick the cheaper solver for a grid, from the measured crossover (the campaign layer's
-choice: ``itr_fft`` knows nothing of ``itr_fv``'s solver).
+"""The one place where a solver is chosen: campaign files, the reduced basis, identification
+and the command line name a solver here, and get a backend of :mod:`itr_fv.backends`.
+
+A choice is ``"fft"`` (the numba FFT-PCG backend ``itr_fft``), ``"fv"`` (the pyamg
+reference ``itr_fv``), ``"auto"`` (the cheaper one for the grid), or the name of any
+registered backend (``itr_fv.backends.available_backends()``, e.g. ``"scipy_fft"``).
 
 Measured (validation/results/crossval.md, bench_solvers.md; shared 2-core machine):
 itr_fft was faster than itr_fv at every size tried -- 24^3 (0.1-0.3 s vs 0.6-20 s),
 64^3 (1-7 s vs 21-32 s for the sphere arrays, 3 s vs FV for the dense 60 % RVE) and
 128^3 -- because pyamg's set-up alone costs more than the whole FFT solve. There is no
-crossover in the measured range, so ``CROSSOVER_VOXELS = 0``: always itr_fft. itr_fv stays
-the reference (and the fallback a caller can force).
+crossover in the measured range, so ``CROSSOVER_VOXELS = 0``: ``"auto"`` is always
+itr_fft. itr_fv stays the reference (and the fallback a caller can force).
 """
 
 from __future__ import annotations
@@ -15,10 +19,17 @@ from collections.abc import Sequence
 
 import numpy as np
 
-__all__ = ["choose_solver", "homogenize_auto", "CROSSOVER_VOXELS"]
+import itr_fft  # noqa: F401 - registers the FFT backends
+from itr_fv.backends import Backend, available_backends, backend_for
+from itr_fv.solve import homogenize
+
+__all__ = ["choose_solver", "check_solver", "solver_backend", "homogenize_auto",
+           "CROSSOVER_VOXELS", "SOLVER_CHOICES"]
 
 #: Grids with fewer voxels than this are solved by itr_fv (measured: none, see above).
 CROSSOVER_VOXELS = 0
+#: Short names accepted besides the registered backend names.
+SOLVER_CHOICES = {"fft": "itr_fft", "fv": "itr_fv"}
 
 
 def choose_solver(shape: int | Sequence[int]) -> str:
@@ -27,16 +38,37 @@ def choose_solver(shape: int | Sequence[int]) -> str:
     return "itr_fv" if n < CROSSOVER_VOXELS else "itr_fft"
 
 
-def homogenize_auto(ms, mat, **kwargs):
-    """Dispatch to :func:`itr_fv.homogenize` or :func:`itr_fft.homogenize` by grid size.
+def check_solver(choice: str, name: str = "solver") -> str:
+    """``choice`` if it names a solver (``fft``, ``fv``, ``auto`` or a backend), else a
+    ValueError naming the argument ``name`` and the choices."""
+    if isinstance(choice, str) and (choice in SOLVER_CHOICES or choice == "auto"
+                                    or choice in available_backends()):
+        return choice
+    names = ", ".join(repr(c) for c in (*SOLVER_CHOICES, "auto", *available_backends()))
+    raise ValueError(f"{name}: expected one of {names}, got {choice!r}")
 
-    ``ms`` may be a Microstructure or a DiscreteProblem; the FFT solver's own options
-    (``dtype``, ``workers``, ``reference``, ``fft_dtype``) are dropped for itr_fv.
+
+def solver_backend(choice: str, shape: int | Sequence[int], *,
+                   threads: int | None = None) -> Backend:
+    """The backend object for a solver choice on a grid.
+
+    Parameters
+    ----------
+    choice : str
+        ``"fft"``, ``"fv"``, ``"auto"`` or a registered backend name.
+    shape : int or (n1, n2, n3)
+        The grid (``"auto"`` picks by its size).
+    threads : int, optional
+        Threads of the numba FFT backend (None: its default for the grid).
     """
-    if choose_solver(ms.shape) == "itr_fv":
-        import itr_fv
-        for option in ("dtype", "workers", "reference", "fft_dtype"):
-            kwargs.pop(option, None)
-        return itr_fv.homogenize(ms, mat, **kwargs)
-    import itr_fft
-    return itr_fft.homogenize(ms, mat, **kwargs)
+    choice = check_solver(choice)
+    name = choose_solver(shape) if choice == "auto" else SOLVER_CHOICES.get(choice, choice)
+    if name == "itr_fft" and threads is not None:
+        return backend_for(name, workers=threads)
+    return backend_for(name)
+
+
+def homogenize_auto(ms, mat, **kwargs):
+    """:func:`itr_fv.solve.homogenize` on the backend :func:`choose_solver` picks for the
+    grid of ``ms`` (a Microstructure or a DiscreteProblem)."""
+    return homogenize(ms, mat, backend=solver_backend("auto", ms.shape), **kwargs)

@@ -1,14 +1,22 @@
-"""Import rules of the package layout: arrows point down only (identify -> surrogate ->
-itr_fft -> itr_fv); itr_fft uses the discrete problem of itr_fv, never its solver; nothing
-imports validation/ or tests/."""
+"""Import rules of the package layout: arrows point down only (itr_identify ->
+itr_surrogate -> itr_fft -> itr_fv); itr_fft uses the discrete problem of itr_fv, never its
+solver; no import circle inside a package; nothing imports validation/ or tests/; the wheel
+lists every subpackage."""
 
 import ast
+import sys
+import tomllib
 from pathlib import Path
 
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-LAYERS = ["itr_fv", "itr_fft", "surrogate", "identify"]  # each may import those before it
+#: Import name -> the repository folder it is installed from (pyproject's package-dir).
+PACKAGES = {"itr_fv": "itr_fv", "itr_fft": "itr_fft", "itr_surrogate": "surrogate",
+            "itr_identify": "identify"}
+LAYERS = list(PACKAGES)  # each may import those before it
+#: Folder names that are not import names: importing them is always a mistake.
+NOT_IMPORT_NAMES = {folder for name, folder in PACKAGES.items() if name != folder}
 
 
 def imported_modules(path: Path) -> set[str]:
@@ -26,12 +34,15 @@ def imported_modules(path: Path) -> set[str]:
 @pytest.mark.parametrize("package", LAYERS)
 def test_imports_point_down_only(package):
     allowed = set(LAYERS[: LAYERS.index(package) + 1])
-    files = sorted((ROOT / package).rglob("*.py"))
+    files = sorted((ROOT / PACKAGES[package]).rglob("*.py"))
     assert files
     for f in files:
         for mod in imported_modules(f):
             top = mod.split(".")[0]
             assert top not in {"validation", "tests", "conftest"}, (f, mod)
+            assert top not in NOT_IMPORT_NAMES, (
+                f"{f.relative_to(ROOT)} imports {mod}: the folder {top}/ installs as "
+                f"{next(n for n, d in PACKAGES.items() if d == top)}")
             if top in LAYERS:
                 assert top in allowed, f"{f.relative_to(ROOT)} imports {mod}"
 
@@ -42,3 +53,149 @@ def test_itr_fft_never_uses_the_fv_solver():
         assert not {m for m in mods if m in ("itr_fv.solver", "itr_fv.homogenize",
                                              "itr_fv.solver.homogenize")}, f
         assert "itr_fv.homogenize" not in f.read_text(encoding="utf-8"), f
+
+
+# ------------------------------------------------------------------------ import circles
+def package_modules(package: str) -> dict[str, Path]:
+    """Dotted module name -> file, for every module of ``package`` (``__init__.py`` is the
+    package's own module)."""
+    folder = ROOT / PACKAGES[package]
+    out = {}
+    for f in sorted(folder.rglob("*.py")):
+        parts = list(f.relative_to(folder).with_suffix("").parts)
+        if parts[-1] == "__init__":
+            parts = parts[:-1]
+        out[".".join([package, *parts])] = f
+    return out
+
+
+def import_graph(package: str) -> dict[str, set[str]]:
+    """Module-level import graph of ``package``: module -> the modules of the same package
+    it imports anywhere in its file (top level or inside functions), absolute and relative
+    imports resolved. ``from .x import name`` counts as importing the submodule ``x.name``
+    where that is a module, else ``x``; importing a submodule does not count as importing
+    its parent package's ``__init__``."""
+    modules = package_modules(package)
+
+    def resolve(name: str) -> str | None:
+        """``name`` or its longest prefix that is a module of the package."""
+        parts = name.split(".")
+        while parts:
+            candidate = ".".join(parts)
+            if candidate in modules:
+                return candidate
+            parts.pop()
+        return None
+
+    graph: dict[str, set[str]] = {}
+    for mod, path in modules.items():
+        is_package = path.name == "__init__.py"
+        here = mod.split(".") if is_package else mod.split(".")[:-1]
+        edges = set()
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            targets = []
+            if isinstance(node, ast.Import):
+                targets = [alias.name for alias in node.names]
+            elif isinstance(node, ast.ImportFrom):
+                if node.level:
+                    base_parts = here[: len(here) - (node.level - 1)]
+                    base = ".".join(base_parts + ([node.module] if node.module else []))
+                else:
+                    base = node.module or ""
+                targets = [f"{base}.{alias.name}" for alias in node.names] or [base]
+            for target in targets:
+                if target.split(".")[0] != package:
+                    continue
+                found = resolve(target)
+                if found is not None and found != mod:
+                    edges.add(found)
+        graph[mod] = edges
+    return graph
+
+
+def find_cycle(graph: dict[str, set[str]]) -> list[str] | None:
+    """One cycle of ``graph`` as a path that ends where it starts, or None."""
+    state: dict[str, int] = {}  # 1: on the current path, 2: done
+    path: list[str] = []
+
+    def visit(node: str) -> list[str] | None:
+        state[node] = 1
+        path.append(node)
+        for nxt in sorted(graph.get(node, ())):
+            if state.get(nxt) == 1:
+                return path[path.index(nxt):] + [nxt]
+            if nxt not in state:
+                cycle = visit(nxt)
+                if cycle:
+                    return cycle
+        path.pop()
+        state[node] = 2
+        return None
+
+    for node in sorted(graph):
+        if node not in state:
+            cycle = visit(node)
+            if cycle:
+                return cycle
+    return None
+
+
+def test_find_cycle_reports_a_circle():
+    assert find_cycle({"a": {"b"}, "b": {"c"}, "c": set()}) is None
+    assert find_cycle({"a": {"b"}, "b": {"c"}, "c": {"a"}}) == ["a", "b", "c", "a"]
+
+
+def test_import_graph_resolves_relative_and_function_imports(tmp_path, monkeypatch):
+    pkg = tmp_path / "pkg"
+    (pkg / "sub").mkdir(parents=True)
+    (pkg / "__init__.py").write_text("from .sub import b\n")
+    (pkg / "a.py").write_text("def f():\n    from .sub.b import g\n")
+    (pkg / "sub" / "__init__.py").write_text("")
+    (pkg / "sub" / "b.py").write_text("from .. import a\nimport pkg.sub\n")
+    monkeypatch.setattr(sys.modules[__name__], "ROOT", tmp_path)
+    monkeypatch.setitem(PACKAGES, "pkg", "pkg")
+    graph = import_graph("pkg")
+    assert graph == {"pkg": {"pkg.sub.b"}, "pkg.a": {"pkg.sub.b"}, "pkg.sub": set(),
+                     "pkg.sub.b": {"pkg.a", "pkg.sub"}}
+    assert find_cycle(graph) == ["pkg.sub.b", "pkg.a", "pkg.sub.b"]
+
+
+@pytest.mark.parametrize("package", LAYERS)
+def test_no_import_circle_inside_a_package(package):
+    cycle = find_cycle(import_graph(package))
+    assert cycle is None, f"import circle in {package}: {' -> '.join(cycle)}"
+
+
+#: itr_identify's subpackages, each may import those before it (and itself).
+IDENTIFY_LAYERS = ["forward", "inference", "discrepancy", "reporting", "workflows", "cli"]
+
+
+def test_itr_identify_subpackages_point_down_only():
+    graph = import_graph("itr_identify")
+    subpackages = {m.split(".")[1] for m in graph if m.count(".") >= 1}
+    assert subpackages == set(IDENTIFY_LAYERS), "a new subpackage: give it its layer"
+    for mod, targets in graph.items():
+        if mod.count(".") < 1:
+            continue
+        level = IDENTIFY_LAYERS.index(mod.split(".")[1])
+        for t in targets:
+            assert IDENTIFY_LAYERS.index(t.split(".")[1]) <= level, f"{mod} imports {t}"
+
+
+# ------------------------------------------------------------------------- the wheel
+def test_pyproject_lists_every_package():
+    """pyproject's explicit ``packages`` list is every folder with an ``__init__.py`` (a
+    subpackage missing from it would be missing from the wheel), and ``package-dir`` maps
+    the import names to the repository's folders."""
+    conf = tomllib.loads((ROOT / "pyproject.toml").read_text(encoding="utf-8"))
+    st = conf["tool"]["setuptools"]
+    assert st["package-dir"] == {n: d for n, d in PACKAGES.items() if n != d}
+    on_disk = set()
+    for name, folder in PACKAGES.items():
+        for init in (ROOT / folder).rglob("__init__.py"):
+            rel = init.parent.relative_to(ROOT / folder).parts
+            on_disk.add(".".join([name, *rel]))
+    assert set(st["packages"]) == on_disk
+    assert len(st["packages"]) == len(set(st["packages"]))
+    assert conf["project"]["scripts"]["itr"] == "itr_identify.cli:main"
+    assert "itr_surrogate" in conf["tool"]["setuptools"]["package-data"]

@@ -3,14 +3,14 @@
 import numpy as np
 import pytest
 
-from surrogate.baselines import (
+from itr_surrogate.baselines import (
     BASELINES,
     make_baseline,
     max_relative_error,
     precision_check,
     r2_score,
 )
-from surrogate.prototype import PrototypeRegressor
+from itr_surrogate.prototype import PrototypeRegressor
 
 NAMES = ["k_Al2O3", "R_Al2O3_silicone"]
 K_GRID = [20.0, 25.0, 30.0, 35.0, 40.0]

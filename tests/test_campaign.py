@@ -10,8 +10,8 @@ from pathlib import Path
 import pyarrow.parquet as pq
 import pytest
 
-from surrogate.campaign import Campaign, CampaignError
-from surrogate.store import RESULT_KEY, CampaignStore
+from itr_surrogate.campaign import Campaign, CampaignError
+from itr_surrogate.store import RESULT_KEY, CampaignStore
 
 ROOT = Path(__file__).resolve().parents[1]
 BIN = Path(sys.executable).parent
@@ -154,7 +154,7 @@ def test_warm_start_and_geometry_reuse_give_the_cold_answer(tmp_path):
     import numpy as np
 
     import itr_fft
-    from surrogate.runner import _build_rve, run_task
+    from itr_surrogate.runner import _build_rve, run_task
 
     camp = Campaign.from_dict({**_small_dict(), "block_size": 6, "replicas": 1})
     CampaignStore(tmp_path).open_for(camp)
@@ -283,7 +283,7 @@ def test_a_failed_task_is_recorded_and_the_others_finish(tmp_path, monkeypatch):
     and the next run solves only that task and clears the record."""
     from dask.distributed import LocalCluster
 
-    import surrogate.runner as runner
+    import itr_surrogate.runner as runner
 
     camp = Campaign.from_dict({**_small_dict(), "replicas": 1, "block_size": 3})
     real = runner.run_task

@@ -12,14 +12,14 @@ import pytest
 import pyvista as pv
 
 import itr_fv
-from identify.cli import main
+from itr_identify.cli import main
 
 
 def run_itr(*args, cwd, timeout=300):
-    """Run ``python -m identify.cli ARGS`` (the console script's entry point) in ``cwd``."""
+    """Run ``python -m itr_identify.cli ARGS`` (the console script's entry point) in ``cwd``."""
     env = dict(os.environ, PYTHONWARNINGS="default")
     env.pop("ITR_DEBUG", None)
-    return subprocess.run([sys.executable, "-m", "identify.cli", *args], cwd=cwd, env=env,
+    return subprocess.run([sys.executable, "-m", "itr_identify.cli", *args], cwd=cwd, env=env,
                           capture_output=True, text=True, timeout=timeout)
 
 
@@ -130,7 +130,7 @@ def test_demo_end_to_end_small(tmp_path):
 
 def test_sigterm_mid_run_leaves_no_output_folder(tmp_path):
     env = dict(os.environ)
-    p = subprocess.Popen([sys.executable, "-m", "identify.cli", "demo", "--box-um", "12",
+    p = subprocess.Popen([sys.executable, "-m", "itr_identify.cli", "demo", "--box-um", "12",
                           "--voxel-um", "0.125", "--out", "run"], cwd=tmp_path, env=env,
                          stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     deadline = time.time() + 120

@@ -14,15 +14,17 @@ import warnings
 import numpy as np
 import pytest
 
-from identify import effects as fx
-from identify.cli import main
-from identify.discrepancy import (DiscrepancySettings, build_tables, find_discrepancy,
-                                  synthetic_measurements)
-from identify.forward import PARAMETRISATIONS, ForwardModel, ForwardSettings
-from identify.pipeline import fractions_of
 from itr_fv import Microstructure
 from itr_fv.rve import FillerSpec, generate_rve
-from surrogate import paper_data
+from itr_identify.cli import main
+from itr_identify.discrepancy import effects as fx
+from itr_identify.discrepancy.decision import find_discrepancy
+from itr_identify.discrepancy.settings import DiscrepancySettings
+from itr_identify.discrepancy.synthetic import synthetic_measurements
+from itr_identify.discrepancy.tables import build_tables
+from itr_identify.forward.model import PARAMETRISATIONS, ForwardModel, ForwardSettings
+from itr_identify.inference.formulations import fractions_of
+from itr_surrogate import paper_data
 
 SETTINGS = DiscrepancySettings(forward=ForwardSettings(box_um=12.0, voxel_um=0.5, replicas=2,
                                                        seed=3))

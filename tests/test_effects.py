@@ -6,13 +6,21 @@ import math
 import numpy as np
 import pytest
 
-from identify.discrepancy import Group, groups_of
-from identify import effects as fx
-from identify.effects import (AIR, AIR_CONDUCTIVITY, Effect, FillerConductivity,
-                              FillerFraction, MatrixConductivity, Porosity, default_effects)
-from identify.forward import PARAMETRISATIONS, ForwardModel, ForwardSettings
-from identify.measurements import Measurements, read_measurements
-from identify.pipeline import fractions_of
+from itr_identify.discrepancy import effects as fx
+from itr_identify.discrepancy.effects import (
+    AIR,
+    AIR_CONDUCTIVITY,
+    Effect,
+    FillerConductivity,
+    FillerFraction,
+    MatrixConductivity,
+    Porosity,
+    default_effects,
+)
+from itr_identify.discrepancy.fit import Group, groups_of
+from itr_identify.forward.model import PARAMETRISATIONS, ForwardModel, ForwardSettings
+from itr_identify.inference.formulations import fractions_of
+from itr_identify.inference.measurements import Measurements, read_measurements
 
 SMALL = ForwardSettings(box_um=12.0, voxel_um=0.5, replicas=2, seed=3)
 

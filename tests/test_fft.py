@@ -2,16 +2,27 @@
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import pytest
 
 import itr_fft
 import itr_fv
-from itr_fv import ConvergenceError, Materials, Microstructure
+from itr_fv import ConvergenceError, Materials, Microstructure, solve
 from itr_fv.gallery import build, rve_cases, sphere_array
 from itr_fv.model import apply_operator, face_conductances, load_vector
 
 CASES = [c.name for c in rve_cases()]
+
+#: The FFT backends run by the same tests: the numba one and the plain scipy one.
+BACKENDS = ["itr_fft", "scipy_fft"]
+
+
+@pytest.fixture(params=BACKENDS)
+def fft_solve(request):
+    """``homogenize(ms, mat, **kw)`` on one FFT backend, through the one solve driver."""
+    return functools.partial(solve.homogenize, backend=request.param)
 
 
 def _rel(a: np.ndarray, b: np.ndarray) -> float:
@@ -20,18 +31,18 @@ def _rel(a: np.ndarray, b: np.ndarray) -> float:
 
 @pytest.mark.parametrize("contact", ["area", "gap", "gap+spots"])
 @pytest.mark.parametrize("name", CASES)
-def test_fft_matches_fv_on_common_set(name, contact):
-    """The two solvers give the same tensor to <= 1e-6 under every contact model (CI size)."""
+def test_fft_matches_fv_on_common_set(name, contact, fft_solve):
+    """The FFT backends give the FV tensor to <= 1e-6 under every contact model (CI size)."""
     ms, mat = build(name, "ci")
     if contact != "area":
         fillers = [p for p in mat.phases if p != mat.matrix]
         spots = ({(a, b): 2e-6 for a in fillers for b in fillers} if contact == "gap+spots"
                  else None)
         mat = build(name, "ci", contact="gap", contact_conductance=spots)[1]
-    fft = itr_fft.homogenize(ms, mat, tol=1e-10, store_fields=False)
+    fft = fft_solve(ms, mat, tol=1e-10, store_fields=False)
     fv = itr_fv.homogenize(ms, mat, tol=1e-10, store_fields=False)
     assert fft.converged and fv.converged
-    assert fft.solver == "itr_fft"
+    assert fft.solver == fft_solve.keywords["backend"]
     assert _rel(np.diag(fft.k_eff), np.diag(fv.k_eff)) <= 1e-6
     assert _rel(fft.k_eff, fv.k_eff) <= 1e-6
     assert fft.floating.count == fv.floating.count
@@ -68,7 +79,7 @@ def test_iterations_do_not_grow_with_grid():
     assert abs(its[1] - its[0]) <= 0.2 * its[0], its
 
 
-def test_warm_start_from_neighbouring_resistance():
+def test_warm_start_from_neighbouring_resistance(fft_solve):
     """Acceptance 3, measured: warm starts converge to the same tensor with fewer iterations.
 
     From theta of R = 1e-7 the 5e-7 solve (one Table 4 step) starts at a relative residual
@@ -78,37 +89,36 @@ def test_warm_start_from_neighbouring_resistance():
     ms, mat = build("al2o3_60", "ci")
     geom = itr_fv.model.face_geometry(ms, contact=mat.contact)
     pairs = [("Al2O3", "silicone"), ("Al2O3", "Al2O3")]
-    first = itr_fft.homogenize(ms, mat.with_values(resistance={p: 1e-7 for p in pairs}),
-                               tol=1e-8, geometry=geom)
+    first = fft_solve(ms, mat.with_values(resistance={p: 1e-7 for p in pairs}),
+                      tol=1e-8, geometry=geom)
     for r2, tol, factor in ((5e-7, 1e-8, 1.0), (1.01e-7, 1e-5, 2.0)):
         mat2 = mat.with_values(resistance={p: r2 for p in pairs})
-        cold = itr_fft.homogenize(ms, mat2, tol=tol, geometry=geom, store_fields=False)
-        warm = itr_fft.homogenize(ms, mat2, tol=tol, geometry=geom, x0=first.theta,
-                                  store_fields=False)
+        cold = fft_solve(ms, mat2, tol=tol, geometry=geom, store_fields=False)
+        warm = fft_solve(ms, mat2, tol=tol, geometry=geom, x0=first.theta, store_fields=False)
         assert warm.converged
         assert _rel(np.diag(warm.k_eff), np.diag(cold.k_eff)) < 10 * tol
         assert sum(cold.iterations) >= factor * sum(warm.iterations), \
             (r2, cold.iterations, warm.iterations)
 
 
-def test_non_convergence_raises_or_warns():
+def test_non_convergence_raises_or_warns(fft_solve):
     """Acceptance 6: maxiter reached -> ConvergenceError; strict=False -> flag + warning."""
     ms, mat = build("random30", "ci")
     with pytest.raises(ConvergenceError) as err:
-        itr_fft.homogenize(ms, mat, tol=1e-10, maxiter=3)
+        fft_solve(ms, mat, tol=1e-10, maxiter=3)
     part = err.value.result
     assert not part.converged and part.iterations == [3, 3, 3]
     with pytest.warns(RuntimeWarning, match="not converged"):
-        res = itr_fft.homogenize(ms, mat, tol=1e-10, maxiter=3, strict=False)
+        res = fft_solve(ms, mat, tol=1e-10, maxiter=3, strict=False)
     assert not res.converged
     assert all(r > 1e-10 for r in res.residuals)
     assert np.all(np.isfinite(res.k_eff))
 
 
-def test_insulating_interfaces_floating_clusters():
+def test_insulating_interfaces_floating_clusters(fft_solve):
     """R = inf: particles float; singular but consistent system converges; matches FV."""
     ms, mat = build("random30_Rinf", 24)
-    fft = itr_fft.homogenize(ms, mat, tol=1e-10)
+    fft = fft_solve(ms, mat, tol=1e-10)
     fv = itr_fv.homogenize(ms, mat, tol=1e-10, store_fields=False)
     assert fft.converged and fft.floating.count == ms.n_particles
     assert _rel(fft.k_eff, fv.k_eff) <= 1e-6
@@ -158,16 +168,16 @@ def test_argument_checks_and_callback():
     assert res.temperature.shape == (1, 16, 16, 16)
 
 
-def test_homogeneous_medium_needs_no_iteration():
+def test_homogeneous_medium_needs_no_iteration(fft_solve):
     mid = np.zeros((8, 8, 8), dtype=np.int32)
     ms = Microstructure.from_labels(mid, mid, voxel_m=1e-6, names=("silicone",))
-    res = itr_fft.homogenize(ms, Materials({"silicone": 0.18}, matrix="silicone"))
+    res = fft_solve(ms, Materials({"silicone": 0.18}, matrix="silicone"))
     assert res.iterations == [0, 0, 0]
     assert np.allclose(res.k_eff, 0.18 * np.eye(3), rtol=1e-14)
 
 
 def test_choose_solver():
-    from surrogate.solver_choice import choose_solver, homogenize_auto
+    from itr_surrogate.solver_choice import choose_solver, homogenize_auto
 
     assert choose_solver((256, 256, 256)) == "itr_fft"
     assert choose_solver(8) in ("itr_fv", "itr_fft")

@@ -9,12 +9,13 @@ import math
 import numpy as np
 import pytest
 
-from identify.calibrate import calibrate, stages_of
-from identify.forward import PARAMETRISATIONS, ForwardModel, ForwardSettings, full_solve
-from identify.measurements import Measurements, read_measurements
-from identify.pipeline import fractions_of, identify
-from identify.screen import paper_grid, screen
-from identify.validate import leave_one_out, validate
+from itr_identify.forward.model import PARAMETRISATIONS, ForwardModel, ForwardSettings, full_solve
+from itr_identify.inference.calibrate import calibrate, stages_of
+from itr_identify.inference.formulations import fractions_of
+from itr_identify.inference.measurements import Measurements, read_measurements
+from itr_identify.inference.pipeline import identify
+from itr_identify.inference.screen import paper_grid, screen
+from itr_identify.inference.validate import leave_one_out, validate
 
 SMALL = ForwardSettings(box_um=12.0, voxel_um=0.5, replicas=3, seed=3)
 TRUE_R = 3.0e-8
@@ -153,7 +154,7 @@ def test_central_point_stays_on_a_bent_ridge_and_off_its_far_end():
     with the best grid point at one end (a ridge's end the data allow): the central point
     is a sample, on the arc (the marginal medians are not: the median of each coordinate
     falls inside the circle), and in the middle of the ridge, not at the best point."""
-    from identify.calibrate import Posterior
+    from itr_identify.inference.calibrate import Posterior
 
     rng = np.random.default_rng(4)
     t = rng.uniform(0, np.pi, 4000)

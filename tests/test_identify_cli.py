@@ -6,7 +6,7 @@ import numpy as np
 import pyarrow.parquet as pq
 import pytest
 
-from identify.cli import main
+from itr_identify.cli import main
 
 TINY = ["--box-um", "12", "--voxel-um", "0.5", "--replicas", "2", "--no-progress"]
 

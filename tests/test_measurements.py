@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from identify.measurements import (
+from itr_identify.inference.measurements import (
     conductivity_from_impedance,
     read_measurements,
     read_tester_readings,

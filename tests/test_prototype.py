@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 
-from surrogate.prototype import LIBRARY, PrototypeRegressor
+from itr_surrogate.prototype import LIBRARY, PrototypeRegressor
 
 
 def sample(n: int, seed: int):

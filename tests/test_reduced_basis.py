@@ -11,8 +11,8 @@ import itr_fv
 from itr_fv import Materials
 from itr_fv.problem import DiscreteProblem
 from itr_fv.rve import FillerSpec, generate_rve
-from surrogate.face_decomposition import ParameterBox, ResistanceDecomposition
-from surrogate.reduced_basis import ReducedBasis, _divergence, _project_divergence_free
+from itr_surrogate.face_decomposition import ParameterBox, ResistanceDecomposition
+from itr_surrogate.reduced_basis import ReducedBasis, _divergence, _project_divergence_free
 
 BOUNDS = {"k_Al2O3": (20.0, 40.0), "R_Al2O3_silicone": (1e-8, 5e-5)}
 
@@ -181,7 +181,7 @@ def test_unfitted_model_says_so(problem, materials):
 
 
 def test_stopping_at_max_solves_warns_and_says_so(problem, materials):
-    from surrogate.reduced_basis import ReducedBasisWarning
+    from itr_surrogate.reduced_basis import ReducedBasisWarning
 
     with pytest.warns(ReducedBasisWarning, match="above tol"):
         rb = ReducedBasis(problem, materials, BOUNDS, tol=1e-6, max_solves=1, solver="fv").fit()

@@ -129,10 +129,11 @@ _SIGTERM_WRITER = textwrap.dedent("""
 
 
 def test_sigterm_during_a_write_leaves_neither_a_truncated_file_nor_a_temp(tmp_path):
-    from identify.cli import _on_sigterm  # the command line's handler: SIGTERM -> SystemExit
+    # the command line's handler: SIGTERM -> SystemExit
+    from itr_identify.cli.dispatch import _on_sigterm
 
     script = tmp_path / "writer.py"
-    script.write_text("import signal\nfrom identify.cli import _on_sigterm\n"
+    script.write_text("import signal\nfrom itr_identify.cli.dispatch import _on_sigterm\n"
                       "signal.signal(signal.SIGTERM, _on_sigterm)\n" + _SIGTERM_WRITER)
     out = tmp_path / "out"
     out.mkdir()

@@ -5,12 +5,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from identify.cli import main
-from surrogate.campaign import Campaign
-from surrogate.prototype import PrototypeRegressor
-from surrogate.reduced_basis import ReducedBasis
-from surrogate.runner import run_campaign
-from surrogate.store import CampaignStore
+from itr_identify.cli import main
+from itr_surrogate.campaign import Campaign
+from itr_surrogate.prototype import PrototypeRegressor
+from itr_surrogate.reduced_basis import ReducedBasis
+from itr_surrogate.runner import run_campaign
+from itr_surrogate.store import CampaignStore
 
 TINY = Path(__file__).resolve().parents[1] / "examples" / "campaign-tiny.toml"
 

@@ -79,8 +79,8 @@ def in_process() -> dict[str, tuple[float, int]]:
 
 def with_workers(workers: int, threads: int) -> tuple[float, int]:
     """Wall time of the 12-solve campaign on a LocalCluster, and its worker count."""
-    from surrogate.campaign import Campaign
-    from surrogate.runner import run_campaign
+    from itr_surrogate.campaign import Campaign
+    from itr_surrogate.runner import run_campaign
 
     camp = Campaign.from_dict({
         "name": "bench", "box_um": BOX, "voxel_um": VOXEL, "replicas": 2, "seed": 1,

@@ -7,10 +7,17 @@ three load cases, tol 1e-8, ``store_fields=False``. Also measured: iterations vs
 fixed spheres, the preconditioner's reference conductivity, warm starts, float32 and a
 profile of one FFT load case. Writes ``validation/results/bench_solvers.md``.
 
+With ``--baseline CHECKOUT`` every case also runs on another checkout of the package (its
+own ``validation/bench_solvers.py --one``), alternating old and new ``--repeat`` times on
+the same machine, and the report gets a before/after table (minimum wall time of the
+repeats, and nanoseconds per voxel and CG iteration).
+
 Usage::
 
     python validation/bench_solvers.py [--fv 64,96,128] [--fft 64,96,128,192,256]
     python validation/bench_solvers.py --one itr_fft 128     # one case, prints JSON
+    python validation/bench_solvers.py --baseline /tmp/old --fft 64,128 --fv 64 \
+        --fft32 "" --scipy 64 --repeat 3 --no-studies --out validation/results/backends.md
 """
 
 from __future__ import annotations
@@ -61,6 +68,10 @@ def one(solver: str, n: int, dtype: str = "float64") -> dict:
         tol = TOL if dtype == "float64" else itr_fft.float32_min_tol(ms.shape)
         res = itr_fft.homogenize(ms, mat, tol=tol, store_fields=False,
                                  dtype=np.dtype(dtype).type)
+    elif solver == "scipy_fft":
+        import itr_fft  # noqa: F401 - registers the backend
+        from itr_fv.solve import homogenize
+        res = homogenize(ms, mat, backend="scipy_fft", tol=TOL, store_fields=False)
     else:
         import itr_fv
         res = itr_fv.homogenize(ms, mat, tol=TOL, store_fields=False)
@@ -70,11 +81,13 @@ def one(solver: str, n: int, dtype: str = "float64") -> dict:
                 converged=res.converged, tol=res.tol)
 
 
-def run_sub(solver: str, n: int, dtype: str = "float64", timeout: float = 1800) -> dict:
-    cmd = [sys.executable, str(Path(__file__).resolve()), "--one", solver, str(n),
-           "--dtype", dtype]
+def run_sub(solver: str, n: int, dtype: str = "float64", timeout: float = 1800,
+            root: Path = ROOT) -> dict:
+    """One case in a fresh interpreter, with the package of checkout ``root``."""
+    script = root / "validation" / "bench_solvers.py"
+    cmd = [sys.executable, str(script), "--one", solver, str(n), "--dtype", dtype]
     try:
-        out = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, cwd=ROOT)
+        out = subprocess.run(cmd, capture_output=True, text=True, timeout=timeout, cwd=root)
     except subprocess.TimeoutExpired:
         return dict(solver=solver, n=n, dtype=dtype, error=f"timeout {timeout:.0f} s")
     if out.returncode != 0:
@@ -232,6 +245,34 @@ def write_report(rows: list[dict], st: dict, path: Path) -> None:
     path.write_text("\n".join(lines) + "\n")
 
 
+def write_comparison(pairs: list[tuple[dict, dict]], baseline: str, path: Path) -> None:
+    """Before/after table: the minimum wall time over the repeats, per checkout."""
+    lines = ["", "## Before / after (same machine, same run, alternating)", "",
+             f"Baseline: `{baseline}`. Minimum over the repeats of the wall time (set-up + "
+             "3 load cases); ns/(voxel iteration) = solve time / (voxels x iterations).", "",
+             "| solver | grid | iterations old / new | wall old (s) | wall new (s) | new / old | "
+             "ns per voxel-iteration old / new |", "| --- | --- | --- | --- | --- | --- | --- |"]
+    for old, new in pairs:
+        if "error" in old or "error" in new:
+            lines.append(f"| {new['solver']} | {new['n']}^3 | - | - | - | - | "
+                         f"{(old.get('error') or new.get('error'))[:60]} |")
+            continue
+        vox = new["n"] ** 3
+
+        def per(r):
+            return 1e9 * sum(r["solve"]) / (vox * max(sum(r["iterations"]), 1))
+        lines.append(f"| {new['solver']} | {new['n']}^3 | {sum(old['iterations'])} / "
+                     f"{sum(new['iterations'])} | {old['wall']:.2f} | {new['wall']:.2f} | "
+                     f"{new['wall'] / old['wall']:.3f} | {per(old):.1f} / {per(new):.1f} |")
+    with path.open("a") as fh:
+        fh.write("\n".join(lines) + "\n")
+
+
+def _best(runs: list[dict]) -> dict:
+    ok = [r for r in runs if "error" not in r]
+    return min(ok, key=lambda r: r["wall"]) if ok else runs[-1]
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--one", nargs=2, metavar=("SOLVER", "N"))
@@ -239,6 +280,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--fv", default="64,96,128")
     ap.add_argument("--fft", default="64,96,128,192,256")
     ap.add_argument("--fft32", default="256")
+    ap.add_argument("--scipy", default="", help="grids for the plain scipy FFT backend")
+    ap.add_argument("--baseline", default=None,
+                    help="another checkout to time side by side (before/after table)")
+    ap.add_argument("--repeat", type=int, default=1, help="runs per case (minimum kept)")
     ap.add_argument("--no-studies", action="store_true")
     ap.add_argument("--out", default=str(ROOT / "validation" / "results" / "bench_solvers.md"))
     args = ap.parse_args(argv)
@@ -251,13 +296,25 @@ def main(argv: list[str] | None = None) -> int:
     plan = [("itr_fft", int(n), "float64") for n in args.fft.split(",") if n]
     plan += [("itr_fft", int(n), "float32") for n in args.fft32.split(",") if n]
     plan += [("itr_fv", int(n), "float64") for n in args.fv.split(",") if n]
+    plan += [("scipy_fft", int(n), "float64") for n in args.scipy.split(",") if n]
+    pairs = []
     for solver, n, dt in plan:
-        r = run_sub(solver, n, dt)
+        new_runs, old_runs = [], []
+        for _ in range(max(args.repeat, 1)):
+            if args.baseline and solver != "scipy_fft":
+                old_runs.append(run_sub(solver, n, dt, root=Path(args.baseline).resolve()))
+            new_runs.append(run_sub(solver, n, dt))
+        r = _best(new_runs)
         rows.append(r)
         print(json.dumps(r), flush=True)
+        if old_runs:
+            pairs.append((_best(old_runs), r))
+            print("baseline:", json.dumps(pairs[-1][0]), flush=True)
         write_report(rows, {}, Path(args.out))
     st = {} if args.no_studies else studies()
     write_report(rows, st, Path(args.out))
+    if pairs:
+        write_comparison(pairs, args.baseline, Path(args.out))
     print(f"wrote {args.out}")
     return 0
 

@@ -5,7 +5,7 @@ Table 2 as a macroscopic sample has it: the mean of the full solver (itr_fft, th
 directions) over 24 RVEs the forward models never saw (8 sets of 3, packing seeds
 40 + 7 j + r), computed once and kept in ``identification_truth.json`` -> four replicates
 per formulation with Gaussian noise at the paper's replicate spread (Table 3 sample standard
-deviation) -> ``identify.pipeline.identify`` on the noisy table, for 10 seeds and both
+deviation) -> ``itr_identify.inference.pipeline.identify`` on the noisy table, for 10 seeds and both
 parametrisations. Counted: the known value inside the reported 90 % credible interval. Every
 seed draws the noise and the forward models' own RVE replicas anew (packing seeds from
 1000 (s + 1)); with forward models built once, every seed would share one draw of their RVE
@@ -47,9 +47,9 @@ TRUTH_SETS = 8
 
 def truth_set(par: str, settings, j: int) -> dict[str, float]:
     """Mean k_iso of 3 RVEs (packing seeds 40 + 7 j + r) per formulation, W/(m K)."""
-    from identify.forward import PARAMETRISATIONS, ForwardModel, full_solve
-    from identify.pipeline import fractions_of
-    from surrogate import paper_data
+    from itr_identify.forward.model import PARAMETRISATIONS, ForwardModel, full_solve
+    from itr_identify.inference.formulations import fractions_of
+    from itr_surrogate import paper_data
 
     out = {}
     for f in paper_data.formulations():
@@ -83,9 +83,9 @@ def main() -> None:
     ap.add_argument("--parametrisations", default="area,gap")
     ap.add_argument("--out", default=str(ROOT / "validation" / "results" / "identification"))
     args = ap.parse_args()
-    from identify.measurements import Measurements, read_measurements
-    from identify.pipeline import identify
-    from identify.reproduce import ReproduceSettings
+    from itr_identify.inference.measurements import Measurements, read_measurements
+    from itr_identify.inference.pipeline import identify
+    from itr_identify.workflows.reproduce import ReproduceSettings
 
     settings = ReproduceSettings().forward
     table3 = read_measurements()

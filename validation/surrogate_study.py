@@ -10,9 +10,9 @@ gap contact model), run on a Dask LocalCluster by ``itr campaign run``:
 - ``validation/campaigns/surrogate-test.toml``: 30 sets per RVE drawn log-uniformly in R and
   uniformly in k over the same box (60 full solves): held out from every model.
 
-Models: the prototypical-function model (:mod:`surrogate.prototype`), XGBoost, SVR and an
-MLP (:mod:`surrogate.baselines`), all on k_iso (the mean of the diagonal) per row; and the
-reduced basis (:mod:`surrogate.reduced_basis`) of replica 0's RVE, which makes its own full
+Models: the prototypical-function model (:mod:`itr_surrogate.prototype`), XGBoost, SVR and an
+MLP (:mod:`itr_surrogate.baselines`), all on k_iso (the mean of the diagonal) per row; and the
+reduced basis (:mod:`itr_surrogate.reduced_basis`) of replica 0's RVE, which makes its own full
 solves (at most 40) and is compared entry by entry with the held-out solves of that RVE.
 
     python validation/surrogate_study.py                       # runs both campaigns first
@@ -34,18 +34,18 @@ import numpy as np
 import itr_fft
 from itr_fv.io import write_text
 from itr_fv.problem import DiscreteProblem
-from surrogate.baselines import (
+from itr_surrogate.baselines import (
     BASELINES,
     make_baseline,
     max_relative_error,
     precision_check,
     r2_score,
 )
-from surrogate.campaign import Campaign
-from surrogate.prototype import PrototypeRegressor
-from surrogate.reduced_basis import ReducedBasis
-from surrogate.runner import build_rve, run_campaign
-from surrogate.store import CampaignStore
+from itr_surrogate.campaign import Campaign
+from itr_surrogate.prototype import PrototypeRegressor
+from itr_surrogate.reduced_basis import ReducedBasis
+from itr_surrogate.runner import build_rve, run_campaign
+from itr_surrogate.store import CampaignStore
 
 HERE = Path(__file__).resolve().parent
 RESULTS = HERE / "results"

@@ -17,10 +17,10 @@ from collections.abc import Callable, Mapping
 
 import numpy as np
 
-from surrogate import paper_data
+from itr_surrogate import paper_data
 
+from ..forward.model import ForwardModel
 from .calibrate import Posterior, calibrate
-from .forward import ForwardModel
 from .measurements import Measurements
 
 __all__ = ["validate", "leave_one_out", "posterior_prediction"]

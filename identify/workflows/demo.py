@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from surrogate import paper_data
+from itr_surrogate import paper_data
 
 __all__ = ["DemoSettings", "run_demo", "PAPER_K", "PAPER_R", "VOXEL_BIAS", "DEMO_SCATTER"]
 

@@ -8,10 +8,10 @@ from collections.abc import Mapping
 import numpy as np
 
 from itr_fv.parameters import parse_parameter
-from surrogate import paper_data
+from itr_surrogate import paper_data
 
-from .measurements import Measurements
-from .pipeline import Identification
+from ..inference.measurements import Measurements
+from ..inference.pipeline import Identification
 
 __all__ = ["identified_dict", "selection", "table3_lines", "table5_lines", "table6_lines",
            "lofo_lines", "identifiability_lines", "settings_lines", "selection_lines",

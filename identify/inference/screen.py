@@ -21,7 +21,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .forward import ForwardModel
+from ..forward.model import ForwardModel
 from .measurements import Measurements
 
 __all__ = ["paper_grid", "ScreenResult", "screen", "hierarchical_screen",

@@ -1,18 +1,27 @@
-"""Pieces every homogenization solver shares: argument checks, gauge, result assembly.
+"""The solve driver: one code path from a discrete problem to a result, for every backend.
 
-A solver (``itr_fv.homogenize``, ``itr_fft.homogenize``) computes the periodic fields theta
-for the requested load cases of the system of :mod:`itr_fv.model`; everything after that
-(temperatures, fluxes, tensor, clusters, convergence verdict) is done here, once.
+:func:`homogenize` checks the arguments, refuses a solve that cannot fit in memory before
+any work, builds the discrete system once, hands each load case's load vector to the
+backend (:mod:`itr_fv.backends`), fixes the gauge and builds the
+:class:`~itr_fv.result.HomogenizationResult` (tensor, fields, convergence verdict) once.
+``itr_fv.homogenize`` and ``itr_fft.homogenize`` are thin entry points onto it::
+
+    from itr_fv.solve import homogenize
+    res = homogenize(problem, mat, backend="itr_fft", tol=1e-8)
+    res = homogenize(problem, mat, backend=backend_for("itr_fft", dtype=np.float32), tol=2e-6)
 """
 
 from __future__ import annotations
 
 import math
+import time
 import warnings
 from collections.abc import Callable, Sequence
 
 import numpy as np
 
+from . import resources
+from .backends import Backend, backend_for
 from .materials import Materials
 from .microstructure import Microstructure
 from .model import (
@@ -20,12 +29,14 @@ from .model import (
     cell_centres,
     energy_tensor,
     face_fluxes,
+    load_vector,
     mean_flux,
 )
 from .problem import DiscreteProblem
 from .result import ConvergenceError, FloatingClusters, HomogenizationResult
 
-__all__ = ["check_solver_args", "check_x0", "as_problem", "SolveRecord", "build_result"]
+__all__ = ["homogenize", "check_solver_args", "check_x0", "as_problem", "SolveRecord",
+           "build_result", "remove_cluster_means"]
 
 Callback = Callable[[int, int, float], None]
 
@@ -171,3 +182,95 @@ def build_result(ms: Microstructure, g: np.ndarray, records: list[SolveRecord], 
             raise ConvergenceError(msg, result)
         warnings.warn(msg, RuntimeWarning, stacklevel=3)
     return result
+
+
+def homogenize(problem: Microstructure | DiscreteProblem, mat: Materials, *,
+               backend: str | Backend = "itr_fft", tol: float = 1e-8,
+               maxiter: int | None = None, directions: Sequence[int] = (0, 1, 2),
+               x0: np.ndarray | None = None, callback: Callback | None = None,
+               strict: bool = True, store_fields: bool = True, check_memory: bool = True,
+               staircase: bool = True, geometry: FaceGeometry | None = None
+               ) -> HomogenizationResult:
+    """Effective conductivity tensor of one discrete problem by a chosen backend.
+
+    Parameters
+    ----------
+    problem : DiscreteProblem or Microstructure
+        The problem (geometry built once, reused for many parameter sets), or a voxel
+        image whose problem is built here under the contact model of ``mat``.
+    mat : Materials
+        Conductivities (W/(m K)) and interface resistances (m^2 K/W).
+    backend : str or Backend
+        A registered name (:func:`itr_fv.backends.available_backends`: ``"itr_fv"`` pyamg,
+        ``"itr_fft"`` numba FFT-PCG, ``"scipy_fft"`` plain scipy FFT-PCG) or a configured
+        backend object (:func:`itr_fv.backends.backend_for`).
+    tol : float
+        Relative residual ||b - A theta|| / ||b|| to reach, in (0, 1), checked on the true
+        residual.
+    maxiter : int, optional
+        CG iterations per load case (default: the backend's).
+    directions : sequence of int
+        Load cases E = e_d to solve (0, 1, 2 = x, y, z).
+    x0 : ndarray, optional
+        Warm start, shape (len(directions), n1, n2, n3): theta of a neighbouring solve, K.
+    callback : callable, optional
+        ``callback(direction, iteration, relative_residual)`` after every CG iteration.
+    strict : bool
+        Raise :class:`~itr_fv.ConvergenceError` (carrying the partial result) when a load
+        case misses ``tol``; else warn and flag the result.
+    store_fields : bool
+        Keep temperature, theta and face fluxes in the result.
+    check_memory : bool
+        Refuse (:class:`~itr_fv.resources.InsufficientMemoryError`) a solve whose estimated
+        peak exceeds the available memory, before any work.
+    staircase, geometry
+        How to build the problem from a Microstructure (staircase correction of interface
+        resistances; a precomputed :class:`~itr_fv.model.FaceGeometry`); not allowed with a
+        DiscreteProblem's own geometry.
+
+    Returns
+    -------
+    HomogenizationResult
+        ``k_eff`` in W/(m K); ``solver`` is the backend's name; ``info`` holds the
+        backend's preparation facts, ``restarts`` per load case, the contact model and
+        face counts.
+    """
+    t0 = time.perf_counter()
+    given = problem if isinstance(problem, DiscreteProblem) else None
+    ms = given.microstructure if given is not None else problem
+    solver = backend_for(backend)
+    tol, maxiter, dirs = check_solver_args(ms, mat, tol, maxiter, directions, callback,
+                                           solver.default_maxiter)
+    solver.check(ms.shape, tol)
+    x0 = check_x0(x0, ms.shape, dirs)
+    if check_memory:
+        resources.check_memory(ms.shape, solver, store_fields=store_fields,
+                               load_cases=len(dirs))
+    problem = as_problem(given or ms, mat, staircase, geometry)
+    system = problem.system(mat)
+    prepared = solver.prepare(system, ms.voxel_m)
+    setup = time.perf_counter() - t0
+    records, restarts = [], []
+    try:
+        for c, d in enumerate(dirs):
+            t1 = time.perf_counter()
+            E = np.zeros(3)
+            E[d] = 1.0
+            b = load_vector(system.g, ms.voxel_m, E)
+            step = None if callback is None else (lambda it, res, _d=d: callback(_d, it, res))
+            sol = prepared.solve(b, None if x0 is None else x0[c], tol, maxiter, step)
+            del b
+            restarts.append(sol.restarts)
+            records.append(SolveRecord(d, sol.x, sol.iterations, sol.history, sol.residual,
+                                       time.perf_counter() - t1))
+    finally:
+        prepared.close()
+    geometry = problem.geometry
+    info = {**prepared.info, "restarts": restarts, "unknowns": int(math.prod(ms.shape)),
+            "interface_faces": geometry.n_interface_faces,
+            "contact_faces": geometry.n_contact_faces, "contact": problem.contact,
+            "staircase": geometry.staircase}
+    return build_result(ms, system.g, records, labels=system.labels, floating=system.floating,
+                        tol=tol, setup_time=setup, wall_time=time.perf_counter() - t0,
+                        solver=solver.name, store_fields=store_fields, strict=strict,
+                        info=info)

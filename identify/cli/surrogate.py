@@ -1,15 +1,15 @@
 """``itr surrogate fit|show``: surrogates of a campaign's results, stored without pickle.
 
 - ``itr surrogate fit DIR --out model.json``: the prototypical-function model
-  (:class:`surrogate.prototype.PrototypeRegressor`) of k_iso over the parameters the
+  (:class:`itr_surrogate.prototype.PrototypeRegressor`) of k_iso over the parameters the
   campaign varies, for one formulation (all its RVE replicas);
 - ``itr surrogate fit DIR --model reduced-basis --out model.npz``: the certified reduced
-  basis (:class:`surrogate.reduced_basis.ReducedBasis`) of one RVE of the campaign (rebuilt
+  basis (:class:`itr_surrogate.reduced_basis.ReducedBasis`) of one RVE of the campaign (rebuilt
   from its seed) over the box of the campaign's parameter values; it makes its own full
   solves;
 - ``itr surrogate show FILE``: what a stored surrogate holds.
 
-Errors are one line (:mod:`identify.cli` prints them); status 2 for a bad flag, folder or
+Errors are one line (:mod:`itr_identify.cli` prints them); status 2 for a bad flag, folder or
 file.
 """
 
@@ -21,14 +21,14 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["add_surrogate_parser"]
+from .core import CLIError, Parser, number, open_campaign
+
+__all__ = ["add_parser"]
 
 _MODELS = ("prototype", "reduced-basis")
 
 
 def _formulation_rows(store, name: str | None):
-    from .cli import CLIError
-
     table = store.results()
     names = sorted(set(table.column("formulation").to_pylist()))
     if name is None:
@@ -43,8 +43,6 @@ def _formulation_rows(store, name: str | None):
 
 def _varied(camp, table) -> list[str]:
     """The campaign's parameters (flat names) that take more than one value in ``table``."""
-    from .cli import CLIError
-
     known = set(camp.base)
     for f in camp.formulations:
         for s in camp.parameter_sets(f):
@@ -63,13 +61,9 @@ def _varied(camp, table) -> list[str]:
 
 def _fit(args: argparse.Namespace) -> int:
     from itr_fv.io import output_file
+    from itr_surrogate.campaign import CampaignError
 
-    from surrogate.campaign import CampaignError
-
-    from .campaign_cli import _store
-    from .cli import CLIError
-
-    store = _store(args.dir)
+    store = open_campaign(args.dir)
     suffix = ".json" if args.model == "prototype" else ".npz"
     try:
         out = output_file(args.out, suffix, "--out")
@@ -82,7 +76,7 @@ def _fit(args: argparse.Namespace) -> int:
     camp = store.campaign()
     features = _varied(camp, table)
     if args.model == "prototype":
-        from surrogate.prototype import PrototypeRegressor
+        from itr_surrogate.prototype import PrototypeRegressor
 
         X = np.column_stack([np.asarray(table.column(f).to_numpy(), dtype=np.float64)
                              for f in features])
@@ -94,8 +88,8 @@ def _fit(args: argparse.Namespace) -> int:
         print(model.to_expression())
         return 0
     from itr_fv.problem import DiscreteProblem
-    from surrogate.reduced_basis import ReducedBasis
-    from surrogate.runner import build_rve
+    from itr_surrogate.reduced_basis import ReducedBasis
+    from itr_surrogate.runner import build_rve
 
     replicas = sorted(set(table.column("replica").to_pylist()))
     if args.replica not in replicas:
@@ -116,13 +110,11 @@ def _fit(args: argparse.Namespace) -> int:
 
 
 def _show(args: argparse.Namespace) -> int:
-    from .cli import CLIError
-
     path = Path(args.file)
     if not path.is_file():
         raise CLIError(f"FILE: {args.file!r} is not a file", 2)
     if path.suffix.lower() == ".npz":
-        from surrogate.reduced_basis import ReducedBasis
+        from itr_surrogate.reduced_basis import ReducedBasis
 
         rb = ReducedBasis.load(path)
         info = rb.microstructure_info_
@@ -134,7 +126,7 @@ def _show(args: argparse.Namespace) -> int:
               f"(tol {rb.tol:g}, converged {rb.converged_}), {rb.n_interpolation_terms_} "
               f"interpolation terms (eps {rb.interpolation_error_:.1e})")
         return 0
-    from surrogate.prototype import PrototypeRegressor
+    from itr_surrogate.prototype import PrototypeRegressor
 
     try:
         model = PrototypeRegressor.load(path)
@@ -146,12 +138,12 @@ def _show(args: argparse.Namespace) -> int:
     return 0
 
 
-def add_surrogate_parser(sub, parser_class, number) -> None:
+def add_parser(sub) -> None:
     """Register ``surrogate fit|show`` on the ``itr`` subparsers ``sub``."""
     sur = sub.add_parser("surrogate", help="surrogates of a campaign (prototype, reduced basis)",
                          description="Fit a surrogate to a campaign's results and store it "
                          "(JSON or npz, no pickle); show a stored one.")
-    actions = sur.add_subparsers(dest="action", required=True, parser_class=parser_class)
+    actions = sur.add_subparsers(dest="action", required=True, parser_class=Parser)
     fit = actions.add_parser("fit", help="fit a surrogate to a campaign folder")
     fit.add_argument("dir", help="campaign folder (itr campaign run --out DIR)")
     fit.add_argument("--out", required=True, help="model file: .json (prototype) or .npz "

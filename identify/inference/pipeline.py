@@ -1,64 +1,39 @@
 """Identification of one measurement table under one parametrisation, stage by stage.
 
-:func:`identify` packs the RVEs and fits the reduced bases of the single-filler
-formulations over the whole prior box and calibrates them; then, as the paper's hierarchy,
-the two-filler formulations hold the single-filler parameters at a central point of
-their posterior (:meth:`identify.calibrate.Posterior.central`, not the best grid point,
-which can lie far out on a ridge the single-filler data leave) and their reduced bases vary
-only their own contact parameter (none under the gap parametrisation). The earlier stages'
-uncertainty enters a two-filler formulation's likelihood as the relative spread of its
-k_iso over :data:`CARRIED_DRAWS` posterior draws (full solves). Each group of models is
-calibrated once, its replicas are solved at the best values (the *anchor*: the replica
-factor and the RVE scatter there, see :meth:`identify.forward.ForwardModel.anchor_at`) and
-it is calibrated again; the last of these calibrations (over every model) is the result,
-and the paper's screening runs on the same models. Formulation names give the composition:
-a Table 2 name, or ``<filler>-<vol%>`` and ``<filler>-<vol%>-<filler>-<vol%>`` (e.g.
-``Al2O3-62``).
+:func:`identify` packs the RVEs and fits the reduced bases of the single-filler formulations
+over the whole prior box and calibrates them; then, as the paper's hierarchy, the two-filler
+formulations hold the single-filler parameters at a central point of their posterior
+(:meth:`~itr_identify.inference.calibrate.Posterior.central`, not the best grid point, which
+can lie far out on a ridge the single-filler data leave) and their reduced bases vary only
+their own contact parameter (none under the gap parametrisation). The earlier stages'
+uncertainty enters a two-filler formulation's likelihood as the relative spread of its k_iso
+over :data:`CARRIED_DRAWS` posterior draws (full solves). Each group of models is calibrated
+once, its replicas are solved at the best values (the *anchor*: the replica factor and the
+RVE scatter there, see :meth:`itr_identify.forward.model.ForwardModel.anchor_at`) and it is
+calibrated again; the last of these calibrations (over every model) is the result, and the
+paper's screening runs on the same models. Formulation names give the composition
+(:func:`itr_identify.inference.formulations.fractions_of`).
 """
 
 from __future__ import annotations
 
 import math
-import re
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from surrogate import paper_data
-
+from ..forward.model import PARAMETRISATIONS, ForwardModel, ForwardSettings
 from .calibrate import Posterior, calibrate
-from .forward import PARAMETRISATIONS, ForwardModel, ForwardSettings
+from .formulations import fractions_of
 from .measurements import Measurements
 from .screen import ScreenResult, hierarchical_screen
 
-__all__ = ["fractions_of", "Identification", "identify", "CARRIED_DRAWS"]
+__all__ = ["Identification", "identify", "CARRIED_DRAWS"]
 
 #: Draws of the earlier stages' posterior whose spread a later stage's likelihood carries.
 CARRIED_DRAWS = 6
-_PART = re.compile(r"^(Al2O3|AlN)-(\d+(?:\.\d+)?)$")
-
-
-def fractions_of(name: str) -> dict[str, float]:
-    """Filler volume fractions (0-1) of a formulation name (Table 2 or ``<filler>-<vol%>``
-    pairs); ValueError naming the formulation otherwise."""
-    table2 = paper_data.formulations()
-    if name in table2:
-        return dict(table2[name])
-    parts = name.split("-")
-    out: dict[str, float] = {}
-    for i in range(0, len(parts) - 1, 2):
-        m = _PART.match(f"{parts[i]}-{parts[i + 1]}")
-        if m is None or m.group(1) in out:
-            break
-        out[m.group(1)] = float(m.group(2)) / 100
-    else:
-        if out and len(parts) % 2 == 0 and 0 < sum(out.values()) < 0.7:
-            return out
-    raise ValueError(f"formulation {name!r}: expected a Table 2 name or <filler>-<vol%> "
-                     "pairs of Al2O3 and AlN (e.g. Al2O3-62, Al2O3-30-AlN-30), below 70 vol% "
-                     "in all")
 
 
 @dataclass
@@ -121,7 +96,7 @@ def identify(measurements: Measurements, parametrisation: str = "gap", *,
     measurements : Measurements
         One entry per formulation (two replicates at least); names give the composition.
     parametrisation : {"gap", "area"}
-        See :mod:`identify.forward`.
+        See :mod:`itr_identify.forward.model`.
     settings : ForwardSettings, optional
         RVE and surrogate settings (default ``ForwardSettings()``).
     grid_points : int
@@ -192,8 +167,6 @@ def _carried_scatter(model: ForwardModel, posterior: Posterior, seed: int) -> fl
     """Relative spread of a later-stage model's k_iso over :data:`CARRIED_DRAWS` draws of
     the earlier stages' posterior (full solves of the first replica, own parameters at
     the centre of their box)."""
-    from .forward import full_solve
-
     rng = np.random.default_rng(seed)
     rows = posterior.samples[rng.choice(posterior.samples.shape[0], CARRIED_DRAWS,
                                         replace=False)]
@@ -201,11 +174,7 @@ def _carried_scatter(model: ForwardModel, posterior: Posterior, seed: int) -> fl
     for row in rows:
         values = {p: 10 ** row[posterior.names.index(p)] for p in model.fixed}
         values.update(model.centre)
-        k = full_solve(model.microstructures[0], model.materials(values),
-                       model.settings.solver_tol)
-        model.solves.append({"purpose": "earlier-stage spread", "replica": 0, **values,
-                             "k_diagonal": k.tolist()})
-        ks.append(k.mean())
+        ks.append(model.solve_first(values, purpose="earlier-stage spread").mean())
     return float(np.std(ks, ddof=1) / np.mean(ks))
 
 

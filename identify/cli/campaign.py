@@ -1,7 +1,7 @@
-"""``itr campaign run|status|export``: the command line of :mod:`surrogate.runner`.
+"""``itr campaign run|status|export``: the command line of :mod:`itr_surrogate.runner`.
 
 Every check of the campaign file happens before any work starts; errors are one line
-(:mod:`identify.cli` prints them), status 2 for a bad file, flag or folder, 1 for a failure
+(:mod:`itr_identify.cli` prints them), status 2 for a bad file, flag or folder, 1 for a failure
 while running.
 """
 
@@ -10,14 +10,14 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-__all__ = ["add_campaign_parser"]
+from .core import CLIError, Parser, number, open_campaign
+
+__all__ = ["add_parser"]
 
 
 def _run(args: argparse.Namespace) -> int:
-    from surrogate.campaign import Campaign, CampaignError
-    from surrogate.runner import run_campaign
-
-    from .cli import CLIError
+    from itr_surrogate.campaign import Campaign, CampaignError
+    from itr_surrogate.runner import run_campaign
 
     try:
         camp = Campaign.from_toml(args.file)
@@ -34,34 +34,16 @@ def _run(args: argparse.Namespace) -> int:
     return 1 if summary.tasks_failed else 0
 
 
-def _store(folder: str):
-    from surrogate.campaign import CampaignError
-    from surrogate.store import CampaignStore
-
-    from .cli import CLIError
-
-    store = CampaignStore(folder)
-    if not store.campaign_file.exists():
-        raise CLIError(f"DIR: {folder!r} holds no campaign (no campaign.json)", 2)
-    try:
-        store.campaign()
-    except CampaignError as exc:
-        raise CLIError(f"DIR: {folder!r}: {exc}", 2) from None
-    return store
-
-
 def _status(args: argparse.Namespace) -> int:
-    print(_store(args.dir).status().summary())
+    print(open_campaign(args.dir).status().summary())
     return 0
 
 
 def _export(args: argparse.Namespace) -> int:
     from itr_fv.io import output_file
-    from surrogate.campaign import CampaignError
+    from itr_surrogate.campaign import CampaignError
 
-    from .cli import CLIError
-
-    store = _store(args.dir)
+    store = open_campaign(args.dir)
     try:
         path = output_file(args.csv, ".csv", "--csv")
         rows = store.export_csv(path)
@@ -71,12 +53,12 @@ def _export(args: argparse.Namespace) -> int:
     return 0
 
 
-def add_campaign_parser(sub, parser_class, number) -> None:
+def add_parser(sub) -> None:
     """Register ``campaign run|status|export`` on the ``itr`` subparsers ``sub``."""
     camp = sub.add_parser("campaign", help="high-throughput campaigns (Dask, Parquet)",
                           description="Run a campaign file on Dask and store the results as "
                           "Parquet; show its status; export it as CSV.")
-    actions = camp.add_subparsers(dest="action", required=True, parser_class=parser_class)
+    actions = camp.add_subparsers(dest="action", required=True, parser_class=Parser)
     run = actions.add_parser("run", help="run (or resume) a campaign file")
     run.add_argument("file", help="campaign file (TOML)")
     run.add_argument("--out", required=True, help="campaign folder (new, or this campaign's)")

@@ -1,26 +1,25 @@
-"""``itr discrepancy`` (registered by :func:`identify.cli.build_parser`)."""
+"""``itr discrepancy`` (the workflow:
+:func:`itr_identify.workflows.discrepancy.run_discrepancy`)."""
 
 from __future__ import annotations
 
 import argparse
-from collections.abc import Callable
 
-__all__ = ["add_discrepancy_parser"]
+from .core import CLIError, forward_settings, output_folder, read_table, rve_arguments
+
+__all__ = ["add_parser"]
 
 
 def _run(args: argparse.Namespace) -> int:
-    from .cli import CLIError, output_folder
-    from .discrepancy import DiscrepancySettings
-    from .discrepancy_report import run_discrepancy
-    from .identify_cli import forward_settings, read_table
-    from .measurements import read_measurements
+    from ..discrepancy.effects import by_key, default_effects
+    from ..discrepancy.settings import DiscrepancySettings
+    from ..inference.measurements import read_measurements
+    from ..workflows.discrepancy import run_discrepancy
 
     meas = read_table(args.measurements, read_measurements)
 
     settings = DiscrepancySettings(
         forward=forward_settings(DiscrepancySettings().forward, args))
-    from .effects import by_key, default_effects
-
     try:
         effects = by_key(args.effects.split(",")) if args.effects else default_effects()
     except ValueError as exc:
@@ -30,7 +29,8 @@ def _run(args: argparse.Namespace) -> int:
     return 0
 
 
-def add_discrepancy_parser(sub, parser_class, number: Callable) -> None:
+def add_parser(sub) -> None:
+    """Register ``discrepancy`` on the ``itr`` subparsers ``sub``."""
     p = sub.add_parser("discrepancy", help="where model and measurements disagree, and which "
                        "missing effect explains it",
                        description="Calibrate the base model and each candidate effect "
@@ -43,9 +43,7 @@ def add_discrepancy_parser(sub, parser_class, number: Callable) -> None:
                    "paper's Table 3, shipped)")
     p.add_argument("--out", default="itr-discrepancy",
                    help="output folder (default itr-discrepancy)")
-    from .identify_cli import rve_arguments
-
-    rve_arguments(p, number, box="12", voxel="0.5")
+    rve_arguments(p, box="12", voxel="0.5")
     p.add_argument("--effects", default=None,
                    help="comma-separated candidates (default all): matrix, filler, porosity, "
                    "fraction, spots, tester")

@@ -13,9 +13,9 @@ import numpy as np
 
 from itr_fv.io import atomic_path
 from itr_fv.psd import LogNormalPSD, fit_truncated_sample
-from surrogate import paper_data
+from itr_surrogate import paper_data
 
-from .pipeline import Identification
+from ..inference.pipeline import Identification
 
 __all__ = ["psd_figure", "rve_figure", "parity_figure", "screening_figure",
            "posterior_figure", "packed_diameters", "temperature_figure"]

@@ -1,19 +1,18 @@
-"""Report of the discrepancy workflow: markdown, JSON and a before/after figure."""
+"""Report of the discrepancy workflow: markdown lines and a before/after figure."""
 
 from __future__ import annotations
 
-import json
-from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
 
-from itr_fv.io import atomic_path, begin_run, write_manifest, write_text
+from itr_fv.io import atomic_path
 
-from .discrepancy import Discrepancy, DiscrepancySettings, ModelFit, find_discrepancy
-from .measurements import Measurements
+from ..discrepancy.decision import Discrepancy
+from ..discrepancy.fit import ModelFit
+from ..discrepancy.settings import DiscrepancySettings
 
-__all__ = ["report_lines", "gap_figure", "run_discrepancy"]
+__all__ = ["report_lines", "gap_figure"]
 
 
 def _fit_row(d: Discrepancy, m: ModelFit) -> str:
@@ -106,36 +105,3 @@ def gap_figure(d: Discrepancy, path: Path) -> Path:
         fig.savefig(tmp, dpi=120, format="png")
     plt.close(fig)
     return Path(path)
-
-
-def run_discrepancy(meas: Measurements, settings: DiscrepancySettings, out: Path, *,
-                    effects: list | None = None, progress: bool = True,
-                    echo: Callable[[str], None] = print) -> Discrepancy:
-    """The workflow on ``meas`` (``effects``: the candidates, default the whole library)
-    with its report in ``out``: discrepancy.md, .json, .png, manifest.json."""
-    from tqdm.auto import tqdm
-
-    from .discrepancy import build_tables, n_solves
-    from .effects import default_effects
-    from .pipeline import fractions_of
-
-    out = Path(out)
-    begin_run(out)
-    comps = {f: fractions_of(f) for f in meas.formulations}
-    singles = {f: c for f, c in comps.items() if len(c) == 1}
-    effects = default_effects() if effects is None else list(effects)
-    with tqdm(total=n_solves(len(singles), settings, effects), desc="forward solves",
-              unit="solve", disable=not progress) as bar:
-        tables = build_tables(singles, settings=settings, effects=effects,
-                              tick=lambda: bar.update())
-    d = find_discrepancy(meas, settings=settings, tables=tables)
-    files = [write_text(out / "discrepancy.json", json.dumps(d.to_dict(), indent=2) + "\n")]
-    files.append(gap_figure(d, out / "discrepancy.png"))
-    lines = [f"# Discrepancy between model and measurements: {meas.source}", ""]
-    lines += report_lines(d, settings)
-    lines += ["", "Figure: `discrepancy.png` (relative error per group, before and after)."]
-    files.append(write_text(out / "discrepancy.md", "\n".join(lines) + "\n"))
-    files.append(write_manifest(out, files, {"job": "discrepancy", "measurements": meas.source,
-                                             "forward": settings.forward.to_dict()}))
-    echo(f"discrepancy: {d.verdict}; wrote {out / 'discrepancy.md'}")
-    return d

@@ -5,15 +5,15 @@ Two kinds of CSV file:
 - a *measurement table* (the paper's Table 3 is shipped and the default):
   ``formulation,replicate,k_W_per_mK``, one row per sample, with an optional
   ``thickness_mm`` column: the thickness at which an apparent conductivity was measured
-  (read by the discrepancy workflow, :mod:`identify.discrepancy`);
+  (read by the discrepancy workflow, :mod:`itr_identify.discrepancy`);
 - *tester readings* (Methods, Eqs. 7-10): ``formulation,replicate,thickness_mm,
   impedance_K_mm2_per_W``, the thermal impedance ``I = A dT / Q`` of one sample at several
   thicknesses. The contact resistance between sample and meter bars is the intercept of
   ``I = a t + b`` (Eq. 8), so ``K = 1 / a`` (Eq. 10) with the slope's standard error.
 
 Every formulation needs at least two replicates (its variance enters the likelihood of
-:mod:`identify.calibrate`); errors are ValueErrors that name the file, the line and the
-column.
+:mod:`itr_identify.inference.calibrate`); errors are ValueErrors that name the file, the line
+and the column.
 """
 
 from __future__ import annotations
@@ -142,7 +142,7 @@ def _check_formulation(path: Path, line: int, name: str, known) -> None:
 
 
 def _known_formulations() -> set[str]:
-    from surrogate import paper_data
+    from itr_surrogate import paper_data
 
     return set(paper_data.formulations())
 
@@ -170,7 +170,7 @@ def read_measurements(path: str | Path | None = None, *,
     formulations : set of str or callable, optional
         Names the table may use (default: the paper's Table 2 formulations), or a function
         that raises ValueError for a name it does not accept (e.g.
-        :func:`identify.pipeline.fractions_of`).
+        :func:`itr_identify.inference.formulations.fractions_of`).
 
     Raises
     ------
@@ -180,7 +180,7 @@ def read_measurements(path: str | Path | None = None, *,
         non-positive thickness where the column exists.
     """
     if path is None:
-        from surrogate import paper_data
+        from itr_surrogate import paper_data
 
         p, text = Path("measured_tc.csv"), paper_data.table_text("measured_tc")
     else:

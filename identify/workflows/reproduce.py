@@ -22,11 +22,11 @@ from pathlib import Path
 
 from itr_fv.io import atomic_path, begin_run, write_manifest, write_text
 
-from . import figures, report
-from .forward import ForwardSettings
-from .measurements import Measurements, read_measurements
-from .pipeline import Identification, identify
-from .validate import leave_one_out, validate
+from ..forward.model import ForwardSettings
+from ..inference.measurements import Measurements, read_measurements
+from ..inference.pipeline import Identification, identify
+from ..inference.validate import leave_one_out, validate
+from ..reporting import figures, report
 
 __all__ = ["ReproduceSettings", "run_reproduce", "run_identify", "write_solves"]
 
@@ -174,7 +174,7 @@ def _figures(idents: dict[str, Identification], validation: dict, out: Path
 
 
 def _reproduce_markdown(idents, meas, validation, lofo, psd_fits, timing, settings) -> str:
-    from surrogate import paper_data
+    from itr_surrogate import paper_data
 
     table1 = paper_data.psd_lognormal()
     lines = ["# The paper's pipeline, reproduced (`itr reproduce`)", "",

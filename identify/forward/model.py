@@ -10,12 +10,12 @@ depends on and what contact model carries them:
   two particle-matrix interfaces and the true matrix film between the spheres (Eq. 6).
 
 A :class:`ForwardModel` packs the replicas of one formulation (Table 1 size distributions),
-fits a :class:`surrogate.reduced_basis.ReducedBasis` on the first replica over the prior
+fits a :class:`itr_surrogate.reduced_basis.ReducedBasis` on the first replica over the prior
 box of its parameters, and measures the RVE-to-RVE scatter by full solves of every replica
 at the centre of the box. Its prediction is the first replica's reduced basis scaled by the
 ratio of the replica mean to the first replica at the centre
 (:attr:`ForwardModel.replica_factor`). Filler and matrix conductivities stay at the paper's values
-(``surrogate.paper_data.PAPER_CONDUCTIVITY``), as in the paper's screening.
+(``itr_surrogate.paper_data.PAPER_CONDUCTIVITY``), as in the paper's screening.
 """
 
 from __future__ import annotations
@@ -30,14 +30,18 @@ import numpy as np
 
 from itr_fv import Materials
 from itr_fv.parameters import parameter_name
+from itr_fv.problem import DiscreteProblem
 from itr_fv.rve import FillerSpec, generate_rve
-from surrogate import paper_data
-from surrogate.reduced_basis import ReducedBasis
+from itr_surrogate import paper_data
+from itr_surrogate.engine import RVEData, SolveEngine, SolveRequest, cached_problem
+from itr_surrogate.reduced_basis import ReducedBasis
 
 __all__ = ["Parametrisation", "PARAMETRISATIONS", "ForwardSettings", "ForwardModel",
            "full_solve", "MATRIX"]
 
 MATRIX = "silicone"
+#: The engine of models built without one: serial, in this process, no store.
+_SERIAL = SolveEngine()
 #: Packing draws per replica before a failure is raised.
 PACKING_ATTEMPTS = 12
 
@@ -138,18 +142,18 @@ def _specs(fractions: Mapping[str, float]) -> list[FillerSpec]:
             for f, v in fractions.items()]
 
 
-def full_solve(ms, materials: Materials, tol: float) -> np.ndarray:
-    """Diagonal of k_eff (3,), W/(m K), by itr_fft (three load cases) of ``ms``, a
-    Microstructure or its :class:`~itr_fv.problem.DiscreteProblem` (geometry built once for
-    many solves). The per-area contact model's VoxelContactWarning is silenced: that
-    parametrisation is tied to its voxel on purpose (the report says so)."""
-    import itr_fft
-    from itr_fv.checks import VoxelContactWarning
-
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", VoxelContactWarning)
-        res = itr_fft.homogenize(ms, materials, tol=tol, store_fields=False)
-    return np.diag(res.k_eff).copy()
+def full_solve(ms, materials: Materials, tol: float, *, engine: SolveEngine | None = None,
+               **labels) -> np.ndarray:
+    """Diagonal of k_eff (3,), W/(m K), of ``ms`` (a packed Microstructure, or its
+    :class:`~itr_fv.problem.DiscreteProblem`) by a full solve on the solve engine
+    (:mod:`itr_surrogate.engine`; default: this process, no store). The engine keeps one
+    discrete problem per RVE, so many solves of one RVE build its geometry once; the
+    per-area contact model's VoxelContactWarning is silenced there (that parametrisation is
+    tied to its voxel on purpose; the report says so). ``labels`` go with the stored row."""
+    if isinstance(ms, DiscreteProblem):
+        ms = ms.microstructure
+    request = SolveRequest.for_materials(RVEData.of(ms), materials, tol, **labels)
+    return (engine or _SERIAL).solve_one(request).k_diagonal
 
 
 @dataclass
@@ -175,6 +179,7 @@ class ForwardModel:
     fixed: dict[str, float] = field(default_factory=dict)
     carried_scatter: float = 0.0
     build_seconds: float = 0.0
+    engine: SolveEngine | None = field(default=None, repr=False, compare=False)
 
     @property
     def parameters(self) -> list[str]:
@@ -227,22 +232,23 @@ class ForwardModel:
         self.microstructures = [self.pack(r) for r in range(s.replicas)]
         self.centre = {p: math.sqrt(lo * hi) for p, (lo, hi) in bounds.items()}
         mat = self.materials(self.centre)
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")  # VoxelContactWarning: the area model on purpose
-            if bounds:
-                self.rb = ReducedBasis(self.microstructures[0], mat, bounds, tol=s.rb_tol,
+        if bounds:
+            first = RVEData.of(self.microstructures[0])
+            # the reduced basis works on the engine's problem of replica 0 (one geometry)
+            problem = cached_problem(first, mat.contact)[0] if not self._engine.distributed \
+                else DiscreteProblem(self.microstructures[0], contact=mat.contact)
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")  # VoxelContactWarning: the area model
+                self.rb = ReducedBasis(problem, mat, bounds, tol=s.rb_tol,
                                        max_solves=s.rb_max_solves, solver_tol=s.solver_tol,
-                                       seed=s.seed, progress=progress).fit()
-            for h in (self.rb.history_ if self.rb is not None else []):
-                self.solves.append({"purpose": "reduced basis", "replica": 0,
-                                    **h["parameters"], "k_diagonal": h["k_diagonal"]})
-            ks = []
-            for r, ms in enumerate(self.microstructures):
-                k = full_solve(ms, mat, s.solver_tol)
-                ks.append(k)
-                self.solves.append({"purpose": "RVE scatter", "replica": r, **self.centre,
-                                    "k_diagonal": k.tolist()})
-        self.replica_k = np.array(ks)
+                                       seed=s.seed, progress=progress)
+                self.rb.fit(full_solve=lambda _problem, m: self._engine.solve_one(
+                    self._request(0, m, purpose="reduced basis", fields=True)))
+        for h in (self.rb.history_ if self.rb is not None else []):
+            self.solves.append({"purpose": "reduced basis", "replica": 0,
+                                **h["parameters"], "k_diagonal": h["k_diagonal"]})
+        ks = self._solve_all(self.centre, purpose="RVE scatter")
+        self.replica_k = ks
         self.build_seconds = time.perf_counter() - t0
         return self
 
@@ -327,15 +333,39 @@ class ForwardModel:
                 for _ in self.microstructures:
                     tick()
             return self.anchor_k.copy()
+        return self._solve_all(values, purpose=purpose, tick=tick)
+
+    @property
+    def _engine(self) -> SolveEngine:
+        return self.engine if self.engine is not None else _SERIAL
+
+    def _request(self, replica: int, mat: Materials, *, purpose: str,
+                 fields: bool = False) -> SolveRequest:
+        return SolveRequest.for_materials(
+            RVEData.of(self.microstructures[replica]), mat, self.settings.solver_tol,
+            fields=fields, purpose=purpose, formulation=self.formulation, replica=replica)
+
+    def _solve_all(self, values: Mapping[str, float], *, purpose: str,
+                   tick: Callable[[], None] | None = None) -> np.ndarray:
+        """Full solves (replicas, 3) of every replica at ``values`` on the engine (the
+        replicas in parallel where it has workers), recorded in :attr:`solves`."""
         mat = self.materials(values)
+        requests = [self._request(r, mat, purpose=purpose)
+                    for r in range(len(self.microstructures))]
+        results = self._engine.solve(requests, tick=tick)
         out = []
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            for r, ms in enumerate(self.microstructures):
-                k = full_solve(ms, mat, self.settings.solver_tol)
-                out.append(k)
-                self.solves.append({"purpose": purpose, "replica": r, **values,
-                                    "k_diagonal": k.tolist()})
-                if tick is not None:
-                    tick()
+        for r, res in enumerate(results):
+            k = res.k_diagonal
+            out.append(k)
+            self.solves.append({"purpose": purpose, "replica": r, **values,
+                                "k_diagonal": k.tolist()})
         return np.array(out)
+
+    def solve_first(self, values: Mapping[str, float], *, purpose: str) -> np.ndarray:
+        """Full solve (3,) of the first replica at ``values`` (with :attr:`fixed`), recorded
+        in :attr:`solves`."""
+        k = self._engine.solve_one(self._request(0, self.materials(values),
+                                                 purpose=purpose)).k_diagonal
+        self.solves.append({"purpose": purpose, "replica": 0, **dict(values),
+                            "k_diagonal": k.tolist()})
+        return k

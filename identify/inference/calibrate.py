@@ -6,12 +6,13 @@ its degrees of freedom by Welch-Satterthwaite) of squared scale
 
     v(theta) = s^2 / n  +  (sigma_rve k(theta))^2  +  e(theta)^2,
 
-``s^2 / n`` the replicate variance of the mean (:mod:`identify.measurements`) (plus
-``(sigma_c k)^2`` in a later stage: the spread of its k_iso over the earlier stages'
-posterior, see :mod:`identify.pipeline`), ``sigma_rve`` the relative RVE-to-RVE scatter of
-the k_iso of one RVE (:attr:`identify.forward.ForwardModel.rve_scatter`, pooled over a
-filler system), ``k`` the forward model's k_iso (the first replica's reduced basis scaled to
-the replica mean) and ``e`` its certified error bound. The RVE term is an upper bound of that
+``s^2 / n`` the replicate variance of the mean (:mod:`itr_identify.inference.measurements`)
+(plus ``(sigma_c k)^2`` in a later stage: the spread of its k_iso over the earlier stages'
+posterior, see :mod:`itr_identify.inference.pipeline`), ``sigma_rve`` the relative
+RVE-to-RVE scatter of the k_iso of one RVE
+(:attr:`itr_identify.forward.model.ForwardModel.rve_scatter`, pooled over a filler system),
+``k`` the forward model's k_iso (the first replica's reduced basis scaled to the replica
+mean) and ``e`` its certified error bound. The RVE term is an upper bound of that
 part of the error: the replica mean misses the ensemble mean by ``sigma_rve / sqrt(R)``.
 The prior is log-uniform over the reduced-basis box.
 
@@ -38,7 +39,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.special import gammaln
 
-from .forward import ForwardModel
+from ..forward.model import ForwardModel
 from .measurements import Measurements
 
 __all__ = ["Stage", "Posterior", "stages_of", "calibrate", "pooled_scatter", "variance",

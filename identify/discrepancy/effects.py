@@ -2,7 +2,7 @@
 
 Every candidate has one physical parameter, a nominal value at which the base model is
 recovered exactly, a grid of values on which the discrepancy workflow
-(:mod:`identify.discrepancy`) solves the full model, the signature it leaves in the data and
+(:mod:`itr_identify.discrepancy`) solves the full model, the signature it leaves in the data and
 the measurement that separates it from its look-alikes. Three kinds:
 
 - *material*: a phase conductivity changes (matrix off nominal, filler below nominal);

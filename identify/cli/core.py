@@ -1,0 +1,197 @@
+"""The common core of the ``itr`` command line: its error, argument parser and number
+types, flag names, the output folder, and the flags and readers that several commands share.
+The command modules (:mod:`~itr_identify.cli.demo`, :mod:`~itr_identify.cli.campaign`,
+:mod:`~itr_identify.cli.surrogate`, :mod:`~itr_identify.cli.reproduce`,
+:mod:`~itr_identify.cli.identify`, :mod:`~itr_identify.cli.discrepancy`) import this
+module; :mod:`~itr_identify.cli.dispatch` registers them and runs ``main``.
+
+Every failure is one line on standard error, ``itr: error: ...`` naming the flag where a
+flag is at fault, with exit status 2 for bad input (usage, values, output folder) and 1 for a
+failure while running (packing, solver, memory, disk). No traceback is shown unless the
+environment sets ``ITR_DEBUG=1``. An output folder that the command created is removed
+again when the run fails; files are written atomically and ``manifest.json`` last.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import math
+import shutil
+import tempfile
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+__all__ = ["CLIError", "Parser", "number", "FLAG_NAMES", "flagged", "output_folder",
+           "open_campaign", "rve_arguments", "forward_settings", "read_table",
+           "identification_arguments", "reproduce_settings"]
+
+#: Library argument names as the command line spells them, for error messages.
+FLAG_NAMES = {"box_um": "--box-um", "voxel_um": "--voxel-um", "volume_fraction": "--fraction",
+              "seed": "--seed", "tol": "--tol", "path": "--out"}
+
+
+class CLIError(Exception):
+    """A failure to report as one line; ``status`` 2 for bad input, 1 for a runtime failure."""
+
+    def __init__(self, message: str, status: int = 1) -> None:
+        super().__init__(message)
+        self.status = status
+
+
+class Parser(argparse.ArgumentParser):
+    """argparse with one-line errors (no usage block), exit status 2."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        raise CLIError(message, 2)
+
+
+def number(kind: Callable[[str], float], lo: float | None = None, hi: float | None = None,
+            lo_open: bool = True, hi_open: bool = True, unit: str = "") -> Callable[[str], float]:
+    """argparse type: a finite number in an interval (open or closed at each end)."""
+    def parse(text: str) -> float:
+        try:
+            v = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"not a {'whole ' if kind is int else ''}number: "
+                                             f"{text!r}") from None
+        if not math.isfinite(v):
+            raise argparse.ArgumentTypeError(f"must be finite, got {text!r}")
+        bad_lo = lo is not None and (v <= lo if lo_open else v < lo)
+        bad_hi = hi is not None and (v >= hi if hi_open else v > hi)
+        if bad_lo or bad_hi:
+            left = "(" if lo_open else "["
+            right = ")" if hi_open else "]"
+            span = f"{left}{'-inf' if lo is None else f'{lo:g}'}, " \
+                   f"{'inf' if hi is None else f'{hi:g}'}{right}"
+            raise argparse.ArgumentTypeError(f"expected a value in {span}{unit}, got {text}")
+        return v
+    return parse
+
+
+def flagged(message: str) -> str:
+    """Translate a library message 'voxel_um: ...' into the flag's spelling '--voxel-um: ...'."""
+    head, sep, rest = message.partition(":")
+    name = head.strip().split("[")[0].split(" ")[0]
+    if sep and name in FLAG_NAMES:
+        return f"{FLAG_NAMES[name]}{head.strip()[len(name):]}:{rest}"
+    return message
+
+
+@contextlib.contextmanager
+def output_folder(path: str) -> Iterator[Path]:
+    """Check and create the ``--out`` folder; remove it again if the run fails and we made it.
+
+    Raises
+    ------
+    CLIError
+        (status 2) if ``path`` is a file, lies under a file, or cannot be written.
+    """
+    out = Path(path)
+    if out.exists() and not out.is_dir():
+        raise CLIError(f"--out: {path!r} is a file, not a folder", 2)
+    for parent in out.parents:
+        if parent.exists():
+            if not parent.is_dir():
+                raise CLIError(f"--out: {str(parent)!r} is a file, not a folder", 2)
+            break
+    created = not out.exists()
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryFile(dir=out):
+            pass
+    except OSError as exc:
+        if created:
+            with contextlib.suppress(OSError):
+                out.rmdir()
+        raise CLIError(f"--out: cannot write to {path!r} ({exc.strerror or exc})", 2) from None
+    try:
+        yield out
+    except BaseException:
+        if created:
+            shutil.rmtree(out, ignore_errors=True)
+        raise
+
+
+# ------------------------------------------------------------------- shared by several commands
+def open_campaign(folder: str):
+    """The :class:`~itr_surrogate.store.CampaignStore` of a campaign folder (``DIR`` of
+    ``itr campaign status|export`` and ``itr surrogate fit``); a CLIError (status 2) when
+    the folder holds no campaign or a broken one."""
+    from itr_surrogate.campaign import CampaignError
+    from itr_surrogate.store import CampaignStore
+
+    store = CampaignStore(folder)
+    if not store.campaign_file.exists():
+        raise CLIError(f"DIR: {folder!r} holds no campaign (no campaign.json)", 2)
+    try:
+        store.campaign()
+    except CampaignError as exc:
+        raise CLIError(f"DIR: {folder!r}: {exc}", 2) from None
+    return store
+
+
+def rve_arguments(p: argparse.ArgumentParser, *, box: str, voxel: str) -> None:
+    """--box-um, --voxel-um, --replicas, --seed (read by :func:`forward_settings`); ``box``
+    and ``voxel`` are the defaults as the help shows them."""
+    p.add_argument("--box-um", type=number(float, 0, None, unit=" um"), default=None,
+                   help=f"RVE edge, um (default {box})")
+    p.add_argument("--voxel-um", type=number(float, 0, None, unit=" um"), default=None,
+                   help=f"voxel edge, um (default {voxel})")
+    p.add_argument("--replicas", type=number(int, 1, 20, hi_open=False), default=None,
+                   help="RVE replicas per formulation, 2-20 (default 3)")
+    p.add_argument("--seed", type=number(int, 0, None, lo_open=False), default=None,
+                   help="packing seed of the first replica (default 1)")
+
+
+def forward_settings(fw, args: argparse.Namespace):
+    """``fw`` (a ForwardSettings) with the command line's --box-um, --voxel-um, --replicas,
+    --seed; a bad value is a CLIError naming the flag."""
+    changes = {k: v for k, v in (("box_um", args.box_um), ("voxel_um", args.voxel_um),
+                                 ("replicas", args.replicas), ("seed", args.seed))
+               if v is not None}
+    try:
+        return fw.with_(**changes)
+    except ValueError as exc:
+        msg = str(exc)
+        for name, flag in (("box_um/voxel_um", "--box-um/--voxel-um"), ("box_um", "--box-um"),
+                           ("voxel_um", "--voxel-um"), ("replicas", "--replicas")):
+            if msg.startswith(name + ":"):
+                msg = flag + msg[len(name):]
+                break
+        raise CLIError(msg, 2) from None
+
+
+def read_table(path: str | None, reader: Callable):
+    """``reader(path)`` with formulations named by composition; a bad file is a CLIError
+    (status 2) naming MEASUREMENTS."""
+    from ..inference.formulations import fractions_of
+
+    try:
+        return reader(path, formulations=fractions_of)
+    except ValueError as exc:
+        msg = str(exc)
+        raise CLIError("MEASUREMENTS: " + (msg[len("path: "):] if msg.startswith("path: ")
+                                           else msg), 2) from None
+
+
+def identification_arguments(p: argparse.ArgumentParser) -> None:
+    """The flags that ``itr reproduce`` and ``itr identify`` share (read by
+    :func:`reproduce_settings`)."""
+    p.add_argument("--parametrisation", choices=["area", "gap", "both"], default="both",
+                   help="area (the paper's per-area contact resistance), gap (physical "
+                   "contacts) or both (default)")
+    rve_arguments(p, box="12; --full 40", voxel="0.25; --full 0.1")
+    p.add_argument("--no-progress", action="store_true", help="no progress bars")
+
+
+def reproduce_settings(args: argparse.Namespace, full: bool = False):
+    """The ReproduceSettings of ``itr reproduce`` and ``itr identify`` from their flags
+    (``full``: start from the paper's RVE, ``--full``)."""
+    from ..workflows.reproduce import ReproduceSettings
+
+    base = ReproduceSettings.full() if full else ReproduceSettings()
+    fw = forward_settings(base.forward, args)
+    pars = ("area", "gap") if args.parametrisation == "both" else (args.parametrisation,)
+    return ReproduceSettings(forward=fw, parametrisations=pars,
+                             leave_one_out=not getattr(args, "no_leave_one_out", False))

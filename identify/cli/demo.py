@@ -1,0 +1,56 @@
+"""``itr demo`` (the job: :func:`itr_identify.workflows.demo.run_demo`)."""
+
+from __future__ import annotations
+
+import argparse
+
+from .core import CLIError, number, output_folder
+
+__all__ = ["add_parser"]
+
+
+def _run(args: argparse.Namespace) -> int:
+    from ..workflows.demo import DemoSettings, run_demo
+
+    voxel = args.box_um / args.n if args.n is not None else args.voxel_um
+    n = args.box_um / voxel
+    if abs(n - round(n)) > 1e-6 * n:
+        raise CLIError(f"--voxel-um: the box ({args.box_um:g} um) is not a whole number of "
+                       f"{voxel:g} um voxels ({n:.3f}); choose --box-um or --voxel-um to fit", 2)
+    if round(n) > 512:
+        raise CLIError(f"--voxel-um: {int(round(n))}^3 voxels is beyond the demo's 512^3 limit", 2)
+    settings = DemoSettings(box_um=args.box_um, voxel_um=voxel, fraction=args.fraction,
+                            seed=args.seed, solver=args.solver, tol=args.tol)
+    with output_folder(args.out) as out:
+        try:
+            run_demo(settings, out)
+        except RuntimeError as exc:
+            if "packing" in str(exc):
+                why = str(exc).split(" -- ")[0]  # drop advice on options the CLI does not have
+                raise CLIError(f"--fraction {args.fraction:g}: the packer could not place the "
+                               f"particles ({why}); use a lower --fraction") from None
+            raise
+    return 0
+
+
+def add_parser(sub) -> None:
+    """Register ``demo`` on the ``itr`` subparsers ``sub``."""
+    demo = sub.add_parser("demo", help="random Al2O3/silicone RVE: k_eff, .vti and figure",
+                          description="One random Al2O3/silicone RVE at the paper's "
+                          "resistances: k_eff, demo.vti, demo.png, demo.json, manifest.json.")
+    demo.add_argument("--box-um", type=number(float, 0, None, unit=" um"), default=16.0,
+                      help="box edge, um (default 16)")
+    demo.add_argument("--voxel-um", type=number(float, 0, None, unit=" um"), default=0.16,
+                      help="voxel edge, um (default 0.16: within 2 %% of the converged k_eff)")
+    demo.add_argument("--n", type=number(int, 0, 512, hi_open=False), default=None,
+                      help="voxels per edge instead of --voxel-um (voxel = box / n)")
+    demo.add_argument("--fraction", type=number(float, 0, 0.68, unit=" (volume fraction)"),
+                      default=0.55, help="Al2O3 volume fraction (default 0.55)")
+    demo.add_argument("--seed", type=number(int, 0, None, lo_open=False), default=1,
+                      help="random seed, >= 0 (default 1)")
+    demo.add_argument("--solver", choices=["fft", "fv"], default="fft",
+                      help="fft (default) or the fv reference")
+    demo.add_argument("--tol", type=number(float, 1e-12, 1, lo_open=False), default=1e-8,
+                      help="relative residual, in [1e-12, 1) (default 1e-8)")
+    demo.add_argument("--out", default="itr-demo", help="output folder (default itr-demo)")
+    demo.set_defaults(func=_run)

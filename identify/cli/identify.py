@@ -1,0 +1,38 @@
+"""``itr identify`` (the workflow: :func:`itr_identify.workflows.reproduce.run_identify`)."""
+
+from __future__ import annotations
+
+import argparse
+
+from .core import identification_arguments, output_folder, read_table, reproduce_settings
+
+__all__ = ["add_parser"]
+
+
+def _run(args: argparse.Namespace) -> int:
+    from ..inference.measurements import read_measurements, read_tester_readings
+    from ..workflows.reproduce import run_identify
+
+    settings = reproduce_settings(args)
+    meas = read_table(args.measurements,
+                      read_tester_readings if args.readings else read_measurements)
+    with output_folder(args.out) as out:
+        run_identify(meas, settings, out, progress=not args.no_progress)
+    return 0
+
+
+def add_parser(sub) -> None:
+    """Register ``identify`` on the ``itr`` subparsers ``sub``."""
+    ide = sub.add_parser("identify", help="identify resistances from your measurement table",
+                         description="Identify interface resistances from a measurement table "
+                         "(formulation,replicate,k_W_per_mK; or tester readings with "
+                         "--readings); writes identified.json, report.md, posterior figures, "
+                         "manifest.json.")
+    ide.add_argument("measurements", metavar="MEASUREMENTS",
+                     help="CSV file: formulation,replicate,k_W_per_mK")
+    ide.add_argument("--readings", action="store_true", help="the file holds tester readings "
+                     "(formulation,replicate,thickness_mm,impedance_K_mm2_per_W)")
+    ide.add_argument("--out", default="itr-identify", help="output folder "
+                     "(default itr-identify)")
+    identification_arguments(ide)
+    ide.set_defaults(func=_run)

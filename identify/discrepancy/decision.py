@@ -1,0 +1,217 @@
+"""The disagreement between the base model and the measurements (chi-square, residual
+structure) and the selection among the candidates (BIC, tie, unexplained): the workflow's
+verdict (:func:`find_discrepancy`)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import stats
+
+from ..inference.formulations import fractions_of
+from ..inference.measurements import Measurements
+from .effects import Effect
+from .fit import Group, ModelFit, fit_model, groups_of
+from .settings import DiscrepancySettings
+from .tables import ForwardTables, build_tables
+
+__all__ = ["Discrepancy", "find_discrepancy", "residual_structure"]
+
+
+@dataclass
+class Discrepancy:
+    """Outcome of the workflow.
+
+    Attributes
+    ----------
+    verdict : {"none", "named", "tie", "unexplained"}
+    statement : str
+        One paragraph: what the data say.
+    groups : list of Group
+    base : ModelFit
+    candidates : list of ModelFit
+        Ranked by BIC, best first.
+    skipped : dict of str to str
+        Candidates not tried, with the reason.
+    p_value_base : float
+        Chi-square test of the base model's residuals.
+    structure : list of str
+        The residuals' trends (filler fraction, filler type, thickness).
+    left_out : list of str
+        Formulations not used (two-filler).
+    """
+
+    verdict: str
+    statement: str
+    groups: list[Group]
+    base: ModelFit
+    candidates: list[ModelFit]
+    skipped: dict[str, str]
+    p_value_base: float
+    structure: list[str]
+    left_out: list[str]
+    effects: list[Effect]
+    winner: ModelFit | None = None
+    tables: ForwardTables | None = None
+
+    def p_value(self, fit: ModelFit) -> float:
+        return float(stats.chi2.sf(fit.chi_square, fit.dof(len(self.groups))))
+
+    def chi_square_per_dof(self, fit: ModelFit) -> float:
+        return fit.chi_square / fit.dof(len(self.groups))
+
+    def to_dict(self) -> dict:
+        def fit_dict(m: ModelFit) -> dict:
+            return {"name": m.name, "parameters": m.parameters,
+                    "interval_90": list(m.interval) if m.interval else None,
+                    "chi_square": m.chi_square, "dof": m.dof(len(self.groups)),
+                    "p_value": self.p_value(m), "bic": m.bic,
+                    "delta_bic": self.base.bic - m.bic,
+                    "predicted": m.predicted.tolist(), "at_grid_edge": m.at_grid_edge}
+        return {"verdict": self.verdict, "statement": self.statement,
+                "groups": [{"label": g.label, "formulation": g.formulation,
+                            "thickness_m": g.thickness_m, "measured": g.mean,
+                            "standard_error": g.standard_error, "n": g.n}
+                           for g in self.groups],
+                "base": fit_dict(self.base), "candidates": [fit_dict(c) for c in self.candidates],
+                "skipped": self.skipped, "structure": self.structure,
+                "left_out": self.left_out,
+                "effects": [e.describe() for e in self.effects]}
+
+
+def residual_structure(groups: Sequence[Group], fit: ModelFit) -> list[str]:
+    """Trends of the standardised residuals ``(measured - model) / sqrt(variance)``: with
+    the filler fraction per filler, between fillers, with the thickness."""
+    z = (np.array([g.mean for g in groups]) - fit.predicted) / np.sqrt(fit.variance)
+    out = []
+    for fl in sorted({g.filler for g in groups}):
+        sel = np.array([g.filler == fl for g in groups])
+        phi = np.array([g.fraction for g in groups])[sel]
+        line = f"{fl}: mean standardised residual {z[sel].mean():+.2f} over {sel.sum()} groups"
+        if np.unique(phi).size >= 3:
+            slope, _, r, p, se = stats.linregress(phi * 100, z[sel])
+            line += (f"; trend with the filler fraction {slope:+.2f} per vol% "
+                     f"(+-{se:.2f}, p = {p:.2g})")
+        out.append(line)
+    fillers = sorted({g.filler for g in groups})
+    if len(fillers) == 2:
+        a, b = (z[np.array([g.filler == fl for g in groups])] for fl in fillers)
+        t, p = stats.ttest_ind(a, b, equal_var=False)
+        out.append(f"{fillers[0]} minus {fillers[1]}: {a.mean() - b.mean():+.2f} "
+                   f"(Welch t = {t:.2f}, p = {p:.2g})")
+    th = np.array([g.thickness_m if g.thickness_m is not None else np.nan for g in groups])
+    if np.isfinite(th).all() and np.unique(th).size >= 2:
+        slope, _, r, p, se = stats.linregress(th * 1e3, z)
+        out.append(f"thickness: trend {slope:+.2f} per mm (+-{se:.2f}, p = {p:.2g})")
+    return out
+
+
+def find_discrepancy(measurements: Measurements, *,
+                     settings: DiscrepancySettings | None = None,
+                     effects: Sequence[Effect] | None = None,
+                     tables: ForwardTables | None = None,
+                     tick: Callable[[], None] | None = None) -> Discrepancy:
+    """Run the workflow on a measurement table.
+
+    Parameters
+    ----------
+    measurements : Measurements
+        Formulation names give the composition
+        (:func:`itr_identify.inference.formulations.fractions_of`); a ``thickness_m`` per
+        replicate enables the thickness covariate.
+    settings : DiscrepancySettings, optional
+    effects : sequence of Effect, optional
+        The candidate library (default :func:`itr_identify.discrepancy.effects.default_effects`).
+    tables : ForwardTables, optional
+        Forward tables of an earlier call (they do not depend on the measurements); built
+        when not given.
+    tick : callable, optional
+        Called after every full solve.
+    """
+    settings = settings or DiscrepancySettings()
+    comps = {f: fractions_of(f) for f in measurements.formulations}
+    left_out = [f for f, c in comps.items() if len(c) != 1]
+    singles = {f: c for f, c in comps.items() if len(c) == 1}
+    if len(singles) < 3:
+        raise ValueError(f"measurements: the workflow needs at least 3 single-filler "
+                         f"formulations, got {sorted(singles)}")
+    if tables is None:
+        tables = build_tables(singles, settings=settings, effects=effects, tick=tick)
+    missing = [f for f in singles if f not in tables.base]
+    if missing:
+        raise ValueError(f"tables: no forward table for {missing}")
+    effects = list(tables.effects if effects is None else effects)
+    groups = groups_of(measurements, comps)
+    base = fit_model(tables, groups, None)
+    skipped, fits = {}, []
+    have_thickness = all(g.thickness_m is not None for g in groups)
+    for e in effects:
+        if e.needs_thickness and not (have_thickness
+                                      and len({g.thickness_m for g in groups}) >= 2):
+            skipped[e.name] = "needs measurements at two thicknesses or more"
+            continue
+        fits.append(fit_model(tables, groups, e))
+    fits.sort(key=lambda m: m.bic)
+    out = Discrepancy("none", "", groups, base, fits, skipped,
+                      float(stats.chi2.sf(base.chi_square, base.dof(len(groups)))),
+                      residual_structure(groups, base), left_out, effects, None, tables)
+    _decide(out, settings)
+    return out
+
+
+def _decide(d: Discrepancy, st: DiscrepancySettings) -> None:
+    n = len(d.groups)
+    significant = d.p_value_base < st.significance
+    base_line = (f"Base model: chi-square {d.base.chi_square:.1f} on {d.base.dof(n)} degrees "
+                 f"of freedom (p = {d.p_value_base:.2g}): the residuals are "
+                 f"{'significant' if significant else 'consistent with the noise'}.")
+    supported = [m for m in d.candidates if d.base.bic - m.bic >= st.bic_margin]
+    edge = [m.name for m in supported if m.at_grid_edge]
+    supported = [m for m in supported if not m.at_grid_edge]
+    if edge:
+        base_line += (f" Lowering the BIC by {st.bic_margin:g} or more only with a resistance "
+                      f"at the edge of its range, hence not named: {', '.join(edge)}.")
+    if not supported:
+        d.verdict = "unexplained" if significant else "none"
+        if significant:
+            best = d.candidates[0] if d.candidates else None
+            near = (f" The closest candidate, {best.name}, lowers the BIC by "
+                    f"{d.base.bic - best.bic:.1f} (< {st.bic_margin:g})." if best else "")
+            d.statement = (base_line + " No candidate of the library explains them: an "
+                           "unexplained discrepancy (a missing effect outside the library, or "
+                           "an error in the data)." + near)
+        else:
+            d.statement = base_line + (f" No candidate lowers the BIC by {st.bic_margin:g} "
+                                       "or more: no effect is named.")
+        return
+    top = supported[0]
+    ties = [m for m in supported[1:] if m.bic - top.bic < st.tie_margin]
+    p_after = d.p_value(top)
+    if p_after < st.significance:
+        d.verdict = "unexplained"
+        d.winner = top
+        d.statement = (base_line + f" The best candidate, {top.name}, lowers the BIC by "
+                       f"{d.base.bic - top.bic:.1f} but leaves a significant residual "
+                       f"(chi-square/dof {d.chi_square_per_dof(top):.2f}, p = {p_after:.2g}): "
+                       "the discrepancy is not explained by one library effect.")
+        return
+    effect = next(e for e in d.effects if e.name == top.name)
+    lo, hi = top.interval
+    named = (f"{top.name}: {effect.parameter} = {top.parameters[effect.parameter]:.3g} "
+             f"(90 % interval {lo:.3g} - {hi:.3g}), BIC lower by "
+             f"{d.base.bic - top.bic:.1f}, chi-square/dof {d.chi_square_per_dof(d.base):.2f} "
+             f"-> {d.chi_square_per_dof(top):.2f}")
+    d.winner = top
+    if ties:
+        d.verdict = "tie"
+        others = "; ".join(f"{m.name} (BIC {m.bic - top.bic:+.1f})" for m in ties)
+        seps = "; ".join(f"{e.name}: {e.separate_by}" for e in d.effects
+                         if e.name in [top.name] + [m.name for m in ties])
+        d.statement = (base_line + f" Best: {named}. Equally good within "
+                       f"{st.tie_margin:g} in BIC: {others}. The data do not separate them; "
+                       f"what would: {seps}.")
+    else:
+        d.verdict = "named"
+        d.statement = base_line + f" Named: {named}."

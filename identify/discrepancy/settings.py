@@ -1,0 +1,58 @@
+"""Settings of the discrepancy workflow (:class:`DiscrepancySettings`)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..forward.model import ForwardSettings
+
+__all__ = ["DiscrepancySettings"]
+
+
+@dataclass(frozen=True)
+class DiscrepancySettings:
+    """Settings of the workflow.
+
+    Attributes
+    ----------
+    forward : ForwardSettings
+        RVE box, voxel, replicas, packing seed, solver tolerance.
+    r_grid_m2K_per_W : tuple of float
+        Resistances solved per formulation, m^2 K/W (log spaced; also the prior range).
+    r_scatter_m2K_per_W : float
+        Resistance at which every replica is solved (RVE scatter, replica factor).
+    fine_points : int
+        Points of the calibration grid per axis.
+    bic_margin : float
+        BIC decrease over the base model that names an effect.
+    tie_margin : float
+        BIC difference under which two candidates explain the data equally well.
+    significance : float
+        p-value of the chi-square test under which a residual is significant.
+    """
+
+    forward: ForwardSettings = field(default_factory=lambda: ForwardSettings(
+        box_um=12.0, voxel_um=0.5, replicas=3))
+    r_grid_m2K_per_W: tuple[float, ...] = tuple(float(x) for x in np.logspace(-9, -6, 7))
+    r_scatter_m2K_per_W: float = 3e-8
+    fine_points: int = 121
+    bic_margin: float = 6.0
+    tie_margin: float = 2.0
+    significance: float = 0.01
+
+    def __post_init__(self) -> None:
+        r = np.asarray(self.r_grid_m2K_per_W, dtype=float)
+        if r.size < 4 or np.any(np.diff(r) <= 0) or r[0] <= 0:
+            raise ValueError("r_grid_m2K_per_W: expected at least 4 increasing resistances "
+                             f"> 0 m^2 K/W, got {self.r_grid_m2K_per_W!r}")
+        if not isinstance(self.fine_points, int) or self.fine_points < 11:
+            raise ValueError(f"fine_points: expected a whole number >= 11, got "
+                             f"{self.fine_points!r}")
+        for name in ("bic_margin", "tie_margin"):
+            if not getattr(self, name) >= 0:
+                raise ValueError(f"{name}: expected >= 0, got {getattr(self, name)!r}")
+        if not 0 < self.significance < 1:
+            raise ValueError(f"significance: expected a p-value in (0, 1), got "
+                             f"{self.significance!r}")

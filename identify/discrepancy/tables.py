@@ -1,0 +1,116 @@
+"""Forward tables of the discrepancy workflow: per single-filler formulation, full solves of
+one RVE on a grid of the filler-matrix resistance for the base model and for every candidate
+effect, and the replica factor and RVE scatter from the other replicas."""
+
+from __future__ import annotations
+
+import time
+import warnings
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from itr_fv.parameters import parameter_name
+from itr_surrogate.engine import RVEData, SolveEngine, SolveRequest
+
+from ..forward.model import MATRIX, PARAMETRISATIONS, ForwardModel
+from .effects import Effect, default_effects
+from .settings import DiscrepancySettings
+
+__all__ = ["ForwardTables", "build_tables", "n_solves", "resistance_name"]
+
+
+@dataclass
+class ForwardTables:
+    """Full-solver k_iso (W/(m K)) per formulation: ``base[f]`` on the resistance grid and
+    ``effect[name][f]`` on resistance x effect-parameter grids, the replica factor and
+    RVE scatter per formulation."""
+
+    settings: DiscrepancySettings
+    effects: list[Effect]
+    base: dict[str, np.ndarray]
+    effect: dict[str, dict[str, np.ndarray]]
+    replica_factor: dict[str, float]
+    rve_scatter: dict[str, float]
+    solves: int = 0
+    seconds: float = 0.0
+
+
+def n_solves(n_formulations: int, settings: DiscrepancySettings,
+             effects: Sequence[Effect]) -> int:
+    """Full solves :func:`build_tables` makes for ``n_formulations`` single-filler ones."""
+    cols = 1 + sum(1 for e in effects for v in e.values
+                   if e.kind != "measurement" and v != e.nominal)
+    return n_formulations * (len(settings.r_grid_m2K_per_W) * cols + settings.forward.replicas)
+
+def resistance_name(filler: str) -> str:
+    """The flat name of the filler-matrix resistance of ``filler``."""
+    return parameter_name("R", filler, MATRIX)
+
+def build_tables(fractions: dict[str, dict[str, float]], *,
+                 settings: DiscrepancySettings | None = None,
+                 effects: Sequence[Effect] | None = None,
+                 tick: Callable[[], None] | None = None,
+                 engine: SolveEngine | None = None) -> ForwardTables:
+    """Solve the forward tables of the single-filler formulations in ``fractions``.
+
+    Parameters
+    ----------
+    fractions : dict of formulation to {filler: volume fraction}
+    settings : DiscrepancySettings, optional
+    effects : sequence of Effect, optional
+        Default: :func:`itr_identify.discrepancy.effects.default_effects`.
+    tick : callable, optional
+        Called after every full solve (progress bars).
+    engine : SolveEngine, optional
+        Where the full solves run and are kept (default: this process, no store); one
+        formulation's table is one batch (parallel on a cluster, each RVE's geometry built
+        once per worker).
+    """
+    settings = settings or DiscrepancySettings()
+    effects = list(default_effects() if effects is None else effects)
+    engine = engine or SolveEngine()
+    t0 = time.perf_counter()
+    s = settings.forward
+    grid = list(settings.r_grid_m2K_per_W)
+    base, table, factor, scatter = {}, {e.name: {} for e in effects}, {}, {}
+    n = 0
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for f, comp in fractions.items():
+            if len(comp) != 1:
+                continue
+            (filler, _), = comp.items()
+            r_name = resistance_name(filler)
+            model = ForwardModel(f, comp, PARAMETRISATIONS["gap"], s, engine=engine)
+            model.microstructures = [model.pack(r) for r in range(s.replicas)]
+            model.replica_k = model.solve_replicas({r_name: settings.r_scatter_m2K_per_W},
+                                                   tick, purpose="RVE scatter")
+            n += len(model.microstructures)
+            factor[f], scatter[f] = model.replica_factor, model.rve_scatter
+            ms0 = model.microstructures[0]
+            # one column per (effect, value) that changes the RVE or its phases; the base
+            # model first; every column is k_iso over the resistance grid
+            columns = [("base", None, ms0, model.materials)]
+            for e in effects:
+                for theta in e.values:
+                    if e.kind != "measurement" and theta != e.nominal:
+                        columns.append((e.name, theta, e.microstructure(ms0, theta, seed=s.seed),
+                                        lambda v, e=e, theta=theta: e.materials(
+                                            model.materials(v), theta)))
+            requests = [SolveRequest.for_materials(
+                RVEData.of(ms), materials_at({r_name: R}), s.solver_tol,
+                purpose="discrepancy table", formulation=f, effect=name,
+                effect_value=theta) for name, theta, ms, materials_at in columns for R in grid]
+            results = engine.solve(requests, tick=tick)
+            n += len(results)
+            k = np.array([r.k_diagonal.mean() for r in results]).reshape(len(columns), len(grid))
+            solved = {(name, theta): k[i] for i, (name, theta, _, _) in enumerate(columns)}
+            base[f] = solved[("base", None)]
+            for e in effects:
+                cols = [base[f] if (e.kind == "measurement" or theta == e.nominal)
+                        else solved[(e.name, theta)] for theta in e.values]
+                table[e.name][f] = np.stack(cols, axis=1)          # (nR, ntheta)
+    return ForwardTables(settings, effects, base, table, factor, scatter, n,
+                         time.perf_counter() - t0)

@@ -1,0 +1,1 @@
+"""Forward models of the identification (:mod:`itr_identify.forward.model`)."""

@@ -1,0 +1,33 @@
+"""Formulation names and their composition: a Table 2 name, or ``<filler>-<vol%>`` and
+``<filler>-<vol%>-<filler>-<vol%>`` (e.g. ``Al2O3-62``, ``Al2O3-30-AlN-30``)."""
+
+from __future__ import annotations
+
+import re
+
+from itr_surrogate import paper_data
+
+__all__ = ["fractions_of"]
+
+_PART = re.compile(r"^(Al2O3|AlN)-(\d+(?:\.\d+)?)$")
+
+
+def fractions_of(name: str) -> dict[str, float]:
+    """Filler volume fractions (0-1) of a formulation name (Table 2 or ``<filler>-<vol%>``
+    pairs); ValueError naming the formulation otherwise."""
+    table2 = paper_data.formulations()
+    if name in table2:
+        return dict(table2[name])
+    parts = name.split("-")
+    out: dict[str, float] = {}
+    for i in range(0, len(parts) - 1, 2):
+        m = _PART.match(f"{parts[i]}-{parts[i + 1]}")
+        if m is None or m.group(1) in out:
+            break
+        out[m.group(1)] = float(m.group(2)) / 100
+    else:
+        if out and len(parts) % 2 == 0 and 0 < sum(out.values()) < 0.7:
+            return out
+    raise ValueError(f"formulation {name!r}: expected a Table 2 name or <filler>-<vol%> "
+                     "pairs of Al2O3 and AlN (e.g. Al2O3-62, Al2O3-30-AlN-30), below 70 vol% "
+                     "in all")

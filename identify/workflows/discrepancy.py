@@ -1,0 +1,49 @@
+"""``itr discrepancy``: the discrepancy workflow (:mod:`itr_identify.discrepancy`) on a
+measurement table, with its report: discrepancy.md, .json, .png and manifest.json."""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+from pathlib import Path
+
+from itr_fv.io import begin_run, write_manifest, write_text
+
+from ..discrepancy.decision import Discrepancy, find_discrepancy
+from ..discrepancy.effects import default_effects
+from ..discrepancy.settings import DiscrepancySettings
+from ..discrepancy.tables import build_tables, n_solves
+from ..inference.formulations import fractions_of
+from ..inference.measurements import Measurements
+from ..reporting.discrepancy_report import gap_figure, report_lines
+
+__all__ = ["run_discrepancy"]
+
+
+def run_discrepancy(meas: Measurements, settings: DiscrepancySettings, out: Path, *,
+                    effects: list | None = None, progress: bool = True,
+                    echo: Callable[[str], None] = print) -> Discrepancy:
+    """The workflow on ``meas`` (``effects``: the candidates, default the whole library)
+    with its report in ``out``: discrepancy.md, .json, .png, manifest.json."""
+    from tqdm.auto import tqdm
+
+    out = Path(out)
+    begin_run(out)
+    comps = {f: fractions_of(f) for f in meas.formulations}
+    singles = {f: c for f, c in comps.items() if len(c) == 1}
+    effects = default_effects() if effects is None else list(effects)
+    with tqdm(total=n_solves(len(singles), settings, effects), desc="forward solves",
+              unit="solve", disable=not progress) as bar:
+        tables = build_tables(singles, settings=settings, effects=effects,
+                              tick=lambda: bar.update())
+    d = find_discrepancy(meas, settings=settings, tables=tables)
+    files = [write_text(out / "discrepancy.json", json.dumps(d.to_dict(), indent=2) + "\n")]
+    files.append(gap_figure(d, out / "discrepancy.png"))
+    lines = [f"# Discrepancy between model and measurements: {meas.source}", ""]
+    lines += report_lines(d, settings)
+    lines += ["", "Figure: `discrepancy.png` (relative error per group, before and after)."]
+    files.append(write_text(out / "discrepancy.md", "\n".join(lines) + "\n"))
+    files.append(write_manifest(out, files, {"job": "discrepancy", "measurements": meas.source,
+                                             "forward": settings.forward.to_dict()}))
+    echo(f"discrepancy: {d.verdict}; wrote {out / 'discrepancy.md'}")
+    return d

@@ -1,0 +1,282 @@
+"""The backend ``"itr_fft"``: FFT-preconditioned CG on the discrete model of :mod:`itr_fv.model`
+with fused numba kernels (the CG itself is :func:`itr_fv.krylov.conjugate_gradients`).
+
+The operator is exactly the one ``itr_fv`` assembles (same face conductances, imported from
+``itr_fv.model``), applied matrix-free by a fused numba stencil kernel. The preconditioner
+is the exact inverse of the constant-coefficient periodic 7-point operator with face
+conductance ``g_ref`` (W/(m^2 K)), i.e. of ``k_ref / h^2 * sum_d 4 sin^2(pi xi_d / n_d)``
+times the voxel volume per face area h with ``k_ref = g_ref h``, zero mode removed, applied
+with real FFTs (``scipy.fft.rfftn`` / ``irfftn``).
+
+Choice of ``g_ref``: preconditioned CG is invariant under a constant rescaling of the
+preconditioner (z -> z / c rescales alpha by c and leaves beta, the iterates and the
+residuals unchanged), so ``g_ref`` does not change the iteration count; it only sets the
+units/magnitude of the preconditioned residual. The default is the geometric mean of the
+positive face conductances (measured: min / geometric / arithmetic / max give the same
+iteration counts, see ``validation/results/bench_solvers.md``). The iteration count is
+governed by the spread of the face conductances, roughly ``sqrt(max g / min g)`` for the
+worst case, and by the interface resistance relative to the voxel: a resistive interface
+of ``R >> h / k_m`` adds small eigenvalues ~ ``h / (R k)`` that grow the count under grid
+refinement.
+
+Memory: the float64 conductances (3 N), the load vector (N), the CG vectors x, r, p, q
+(4 N), and per iteration the rfftn half spectrum (~N) and the irfftn output z (N), where
+N = n1 n2 n3. Measured peak 89-106 bytes per voxel (64^3 to 192^3, float64 and float32
+vectors: the float64 set-up sets the peak; ``validation/results/memory.md``).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from collections.abc import Sequence
+from typing import Any
+
+import numba
+import numpy as np
+import scipy.fft
+
+from itr_fv.backends import Backend, LoadCaseSolution, PreparedSystem, register_backend
+from itr_fv.krylov import ArrayOps, conjugate_gradients
+from itr_fv.problem import DiscreteSystem
+
+from . import _kernels as K
+
+__all__ = ["NumbaFFTBackend", "reference_conductance", "FLOAT32_MIN_TOL", "float32_min_tol",
+           "FFT_BYTES_PER_VOXEL"]
+
+#: Measured peak bytes per voxel, float64 or float32 vectors (module docstring), rounded up.
+FFT_BYTES_PER_VOXEL = 120
+
+#: Smallest relative residual accepted with ``dtype=np.float32``: the rounding of a float32
+#: theta alone leaves a relative residual of a few 1e-7 (it grows with the grid size).
+FLOAT32_MIN_TOL = 1e-6
+
+
+def float32_min_tol(shape: Sequence[int]) -> float:
+    """Smallest tol accepted with float32 vectors on a grid of this shape.
+
+    The rounding of a float32 theta leaves a residual floor that grows like n^2 (the
+    operator amplifies the rounding noise of neighbouring voxels): measured on the dense
+    60 % Al2O3 RVE, CG stalls at 9e-6 on 256^3. The floor used, ``max(1e-6, 2.5e-10 n^2)``
+    (n the largest grid dimension), keeps a margin of ~2x above the stall.
+    """
+    return max(FLOAT32_MIN_TOL, 2.5e-10 * float(max(shape)) ** 2)
+
+#: Grids with fewer voxels than this run single-threaded by default.
+SERIAL_BELOW = 40 ** 3
+
+
+def reference_conductance(g: np.ndarray, reference: str | float = "geometric") -> float:
+    """Face conductance g_ref of the constant-coefficient preconditioner, W/(m^2 K).
+
+    Parameters
+    ----------
+    g : ndarray, shape (3, n1, n2, n3)
+        Face conductances (faces with g = 0 are ignored).
+    reference : {"geometric", "arithmetic", "harmonic", "min", "max"} or float
+        Mean of the positive face conductances to use, or a value in W/(m^2 K).
+
+    Returns
+    -------
+    float
+    """
+    if not isinstance(reference, str):
+        v = float(reference)
+        if not math.isfinite(v) or v <= 0:
+            raise ValueError(f"reference: expected a positive conductance, got {reference!r}")
+        return v
+    if reference == "geometric":
+        s, c = K.log_sum_positive(g)
+        return float(math.exp(s / c)) if c else 1.0
+    pos = g[g > 0]
+    if pos.size == 0:
+        return 1.0
+    if reference == "arithmetic":
+        return float(pos.mean())
+    if reference == "harmonic":
+        return float(pos.size / np.sum(1.0 / pos))
+    if reference == "min":
+        return float(pos.min())
+    if reference == "max":
+        return float(pos.max())
+    raise ValueError(f"reference: unknown choice {reference!r} (geometric, arithmetic, "
+                     "harmonic, min, max or a number)")
+
+
+class _Preconditioner:
+    """z = P (g_ref L)^+ P r with real FFTs; P removes cluster means when there are several."""
+
+    def __init__(self, shape: tuple[int, int, int], g_ref: float, workers: int,
+                 labels_flat: np.ndarray | None, counts: np.ndarray | None,
+                 fft_dtype: np.dtype) -> None:
+        self.shape = shape
+        self.fft_dtype = fft_dtype
+        self.s = [K.laplacian_symbol(n) for n in shape]
+        self.inv_gref = 1.0 / g_ref
+        self.workers = workers
+        self.labels_flat = labels_flat
+        self.counts = counts
+
+    def apply_dot(self, r: np.ndarray) -> tuple[np.ndarray, float]:
+        """z and r . z (the latter from the spectrum, fused with the division)."""
+        r_in = r if r.dtype == self.fft_dtype else r.astype(self.fft_dtype)
+        rhat = scipy.fft.rfftn(r_in, workers=self.workers)
+        del r_in
+        rz = K.spectral_solve(rhat, self.s[0], self.s[1], self.s[2], self.shape[2],
+                              self.inv_gref)
+        z = scipy.fft.irfftn(rhat, s=self.shape, workers=self.workers, overwrite_x=True)
+        del rhat
+        if self.labels_flat is not None:
+            K.project_clusters(z, self.labels_flat, self.counts)
+        return z, rz
+
+    def apply(self, r: np.ndarray) -> np.ndarray:
+        return self.apply_dot(r)[0]
+
+
+class _StencilOperator:
+    """The 7-point operator of the face conductances g, matrix-free (fused numba stencil)."""
+
+    def __init__(self, g: np.ndarray) -> None:
+        self.g = g
+
+    def apply(self, x: np.ndarray, out: np.ndarray) -> None:
+        K.matvec_dot(self.g, x, out)
+
+    def apply_dot(self, x: np.ndarray, out: np.ndarray) -> float:
+        return K.matvec_dot(self.g, x, out)
+
+
+class _FusedOps(ArrayOps):
+    """CG's vector operations as parallel numba kernels (reductions in float64)."""
+
+    def dot(self, a: np.ndarray, b: np.ndarray) -> float:
+        return K.dot(a, b)
+
+    def update(self, x, r, p, q, alpha) -> float:
+        return K.cg_update(x, r, p, q, alpha)
+
+    def direction(self, p, z, beta) -> None:
+        K.direction_update(p, z, beta)
+
+
+_OPS = _FusedOps()
+
+
+class _PreparedFFT(PreparedSystem):
+    def __init__(self, system: DiscreteSystem, voxel_m: float,
+                 backend: NumbaFFTBackend) -> None:
+        g = system.g
+        shape = g.shape[1:]
+        self.g = g
+        self.dtype = backend.dtype
+        self.workers = backend.threads_for(shape)
+        self.labels_flat = self.counts = None
+        if system.labels is not None:
+            self.labels_flat = np.ascontiguousarray(system.labels.ravel(), dtype=np.int32)
+            self.counts = np.bincount(self.labels_flat).astype(np.float64)
+        g_ref = reference_conductance(g, backend.reference)
+        fdt = backend.dtype if backend.dtype == np.float32 else backend.fft_dtype
+        self.operator = _StencilOperator(g)
+        self.preconditioner = _Preconditioner(shape, g_ref, self.workers, self.labels_flat,
+                                              self.counts, fdt)
+        self._old_threads = numba.get_num_threads()
+        numba.set_num_threads(self.workers)
+        self.info = {"g_ref": g_ref, "k_ref": g_ref * voxel_m, "dtype": self.dtype.name,
+                     "fft_dtype": fdt.name, "workers": self.workers}
+
+    def _project(self, v: np.ndarray) -> None:
+        K.project_clusters(v, self.labels_flat, self.counts)
+
+    def solve(self, b, x0, tol, maxiter, callback=None) -> LoadCaseSolution:
+        x = np.zeros(b.shape, dtype=self.dtype) if x0 is None else \
+            np.array(x0, dtype=self.dtype, copy=True)
+        out = conjugate_gradients(self.operator, b, x, tol=tol, maxiter=maxiter,
+                                  preconditioner=self.preconditioner, callback=callback,
+                                  ops=_OPS,
+                                  project=None if self.labels_flat is None else self._project)
+        theta = x if self.dtype == np.float64 else x.astype(np.float64)
+        return LoadCaseSolution(theta, out.iterations, out.history, out.residual, out.restarts)
+
+    def close(self) -> None:
+        numba.set_num_threads(self._old_threads)
+
+
+def _float_dtype(value: Any, name: str) -> np.dtype:
+    try:
+        dt = np.dtype(value)
+    except TypeError:
+        dt = None
+    if dt not in (np.dtype(np.float64), np.dtype(np.float32)):
+        raise ValueError(f"{name}: expected numpy.float64 or numpy.float32, got {value!r}")
+    return dt
+
+
+@register_backend
+class NumbaFFTBackend(Backend):
+    """FFT-preconditioned CG with fused numba kernels (the fast CPU backend).
+
+    Parameters
+    ----------
+    dtype : np.float64 or np.float32
+        Storage precision of the CG vectors and FFTs (reductions, conductances and the
+        final residual stay float64). float32 halves vector memory and FFT time and needs
+        ``tol >= float32_min_tol(shape)`` (1e-6 up to 63^3, growing like n^2); at
+        tol = 3e-6 k_eff agrees with float64 to ~3e-7 of max |K| (diagonal ~3e-8;
+        off-diagonals are first order in the residual).
+    workers : int, optional
+        Threads for the FFTs and the numba kernels (default: 1 below 40^3 voxels, else
+        all threads numba may use).
+    reference : str or float
+        Reference face conductance of the preconditioner (see
+        :func:`reference_conductance`); does not change the iteration count.
+    fft_dtype : np.float32 or np.float64
+        Precision of the preconditioner's FFTs only. The preconditioner is an approximation
+        of A^-1 anyway: applying the exact Laplacian inverse in float32 leaves the CG
+        vectors, the operator, the residual check and hence the converged answer in
+        ``dtype``, gives the same iteration counts (measured to tol = 1e-10) and costs
+        2.6x less FFT time at 128^3. Use float64 to apply it to double precision.
+    """
+
+    name = "itr_fft"
+    default_maxiter = 3000
+
+    def __init__(self, dtype: Any = np.float64, workers: int | None = None,
+                 reference: str | float = "geometric", fft_dtype: Any = np.float32) -> None:
+        self.dtype = _float_dtype(dtype, "dtype")
+        self.fft_dtype = _float_dtype(fft_dtype, "fft_dtype")
+        if workers is not None and (isinstance(workers, bool) or
+                                    not isinstance(workers, (int, np.integer)) or workers < 1):
+            raise ValueError(f"workers: expected a positive integer, got {workers!r}")
+        self.workers = None if workers is None else int(workers)
+        if isinstance(reference, str):
+            if reference not in ("geometric", "arithmetic", "harmonic", "min", "max"):
+                raise ValueError(f"reference: unknown choice {reference!r} (geometric, "
+                                 "arithmetic, harmonic, min, max or a number)")
+        else:
+            reference_conductance(np.ones((3, 1, 1, 1)), reference)  # checks the number
+        self.reference = reference
+
+    def bytes_per_voxel(self) -> int:
+        return FFT_BYTES_PER_VOXEL
+
+    def options(self) -> dict[str, Any]:
+        return {"dtype": self.dtype.name, "workers": self.workers,
+                "reference": self.reference, "fft_dtype": self.fft_dtype.name}
+
+    def check(self, shape: tuple[int, int, int], tol: float) -> None:
+        if self.dtype == np.float32 and tol < float32_min_tol(shape):
+            raise ValueError(f"tol: {tol:.1e} is below what float32 vectors can reach on "
+                             f"this grid ({float32_min_tol(shape):.1e}); use "
+                             "dtype=numpy.float64")
+
+    def threads_for(self, shape: Sequence[int]) -> int:
+        """Threads used on this grid (threads do not pay below ~40^3 voxels)."""
+        workers = self.workers
+        if workers is None:
+            workers = 1 if math.prod(shape) < SERIAL_BELOW else numba.config.NUMBA_NUM_THREADS
+        return int(min(workers, numba.config.NUMBA_NUM_THREADS, os.cpu_count() or 1))
+
+    def prepare(self, system: DiscreteSystem, voxel_m: float) -> PreparedSystem:
+        return _PreparedFFT(system, voxel_m, self)

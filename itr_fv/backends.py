@@ -1,0 +1,188 @@
+"""The backend protocol and the registry of solver backends.
+
+A backend solves the linear systems of one discrete problem (:mod:`itr_fv.problem`) for
+the solve driver (:func:`itr_fv.solve.homogenize`), which does everything else (argument
+checks, the system's face conductances, load vectors, the gauge, the result). A backend
+
+- has a ``name`` (the ``solver`` of a result, the ``backend=`` argument of the driver),
+- states its peak memory per voxel (:meth:`Backend.bytes_per_voxel`, used by the memory
+  guard before any work),
+- prepares one system (:meth:`Backend.prepare`: the AMG hierarchy, the FFT symbols and
+  ``g_ref``), and the prepared system solves one load case at a time with
+  ``solve(b, x0, tol, maxiter, callback)``, written over :func:`itr_fv.krylov.conjugate_gradients`.
+
+Backends register themselves (:func:`register_backend`) when their module is imported;
+installed packages also announce them under the entry-point group ``itr.backends``
+(``name = "module:Class"``), so the driver finds a backend by name without importing
+any of them itself. Adding a backend is one module and one registration.
+"""
+
+from __future__ import annotations
+
+import importlib.metadata
+from abc import ABC, abstractmethod
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from .problem import DiscreteSystem
+
+__all__ = ["Backend", "PreparedSystem", "LoadCaseSolution", "register_backend",
+           "backend_for", "available_backends", "ENTRY_POINT_GROUP"]
+
+#: Entry-point group under which installed packages announce their backends.
+ENTRY_POINT_GROUP = "itr.backends"
+
+#: ``callback(iteration, relative_residual)`` of a backend's solve.
+IterationCallback = Callable[[int, float], None]
+
+
+@dataclass
+class LoadCaseSolution:
+    """What a prepared system returns for one load case.
+
+    Attributes
+    ----------
+    x : ndarray, shape (n1, n2, n3), float64
+        theta, K (gauge not yet fixed: the driver removes cluster means).
+    iterations : int
+        CG iterations.
+    history : list of float
+        Relative residual ||b - A x|| / ||b|| at the start and after every iteration
+        (the last entry is the true residual).
+    residual : float
+        Final true relative residual.
+    restarts : int
+        CG restarts (recursive residual below ``tol`` while the true one was not, or a
+        breakdown).
+    """
+
+    x: np.ndarray
+    iterations: int
+    history: list[float]
+    residual: float
+    restarts: int = 0
+
+
+class PreparedSystem(ABC):
+    """One system prepared by a backend; solves its load cases one at a time."""
+
+    #: Facts about the preparation for the result's ``info`` (levels, g_ref, ...).
+    info: dict[str, Any]
+
+    @abstractmethod
+    def solve(self, b: np.ndarray, x0: np.ndarray | None, tol: float, maxiter: int,
+              callback: IterationCallback | None = None) -> LoadCaseSolution:
+        """Solve A x = b to ``||b - A x|| <= tol ||b||``.
+
+        Parameters
+        ----------
+        b : ndarray, shape (n1, n2, n3)
+            Load vector, W/m^2 x m (sums to zero on every connected cluster).
+        x0 : ndarray or None
+            Start (theta of a neighbouring solve), K.
+        tol : float
+            Relative residual to reach.
+        maxiter : int
+            CG iterations at most.
+        callback : callable, optional
+            ``callback(iteration, relative_residual)`` after every iteration.
+        """
+
+    def close(self) -> None:
+        """Give back what the preparation holds (threads, device memory)."""
+
+
+class Backend(ABC):
+    """A way to solve the discrete system; options are fixed at construction."""
+
+    #: Name under which the backend registers (the result's ``solver``).
+    name: str = ""
+    #: CG iterations per load case when the caller gives none.
+    default_maxiter: int = 1000
+
+    @abstractmethod
+    def bytes_per_voxel(self) -> int:
+        """Measured peak memory of a solve per voxel, bytes (fields not kept)."""
+
+    def check(self, shape: tuple[int, int, int], tol: float) -> None:
+        """Refuse options that cannot work on this grid at this tolerance (ValueError)."""
+
+    @abstractmethod
+    def prepare(self, system: DiscreteSystem, voxel_m: float) -> PreparedSystem:
+        """Prepare ``system`` (face conductances, clusters) on a grid of voxel edge
+        ``voxel_m`` (m) for any number of load cases."""
+
+    def options(self) -> dict[str, Any]:
+        """The backend's options, for reports and the campaign store's keys."""
+        return {}
+
+    def __repr__(self) -> str:
+        opts = ", ".join(f"{k}={v!r}" for k, v in self.options().items())
+        return f"{type(self).__name__}({opts})"
+
+
+_REGISTRY: dict[str, type[Backend]] = {}
+
+
+def register_backend(cls: type[Backend]) -> type[Backend]:
+    """Register a backend class under its ``name`` (usable as a class decorator)."""
+    if not (isinstance(cls, type) and issubclass(cls, Backend)) or not cls.name:
+        raise ValueError(f"backend: expected a Backend subclass with a name, got {cls!r}")
+    known = _REGISTRY.get(cls.name)
+    if known is not None and known is not cls and \
+            (known.__module__, known.__qualname__) != (cls.__module__, cls.__qualname__):
+        raise ValueError(f"backend: the name {cls.name!r} is taken by {known.__module__}."
+                         f"{known.__qualname__}")
+    _REGISTRY[cls.name] = cls
+    return cls
+
+
+def _load_entry_points() -> None:
+    for ep in importlib.metadata.entry_points(group=ENTRY_POINT_GROUP):
+        if ep.name not in _REGISTRY:
+            try:
+                register_backend(ep.load())
+            except ImportError:  # an optional backend whose library is missing
+                continue
+
+
+def available_backends() -> tuple[str, ...]:
+    """Names of the backends that can be used here (registered or installed)."""
+    _load_entry_points()
+    return tuple(sorted(_REGISTRY))
+
+
+def backend_for(backend: str | Backend, **options: Any) -> Backend:
+    """The backend object for a name (with options) or a backend object itself.
+
+    Parameters
+    ----------
+    backend : str or Backend
+        A registered name (``available_backends()``) or a configured backend.
+    **options
+        Options of the named backend's constructor (none with an object).
+
+    Raises
+    ------
+    ValueError
+        Unknown name, options given with an object, or bad options.
+    """
+    if isinstance(backend, Backend):
+        if options:
+            raise ValueError(f"backend: options {sorted(options)} given with a configured "
+                             f"backend object {backend!r}; configure it when creating it")
+        return backend
+    if not isinstance(backend, str):
+        raise ValueError(f"backend: expected a name or a Backend, got {type(backend).__name__}")
+    if backend not in _REGISTRY:
+        _load_entry_points()
+    if backend not in _REGISTRY:
+        raise ValueError(f"backend: unknown {backend!r}; available: "
+                         f"{', '.join(available_backends()) or 'none'}")
+    try:
+        return _REGISTRY[backend](**options)
+    except TypeError as err:  # an option the backend does not take
+        raise ValueError(f"backend: {backend!r} does not take these options: {err}") from None

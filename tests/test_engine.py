@@ -1,0 +1,103 @@
+"""The solve engine: serial and Dask runs give the same numbers, the store keeps every
+finished solve (a re-run solves nothing), and the geometry is built once per RVE."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import itr_fft
+from itr_fv import Materials
+from itr_fv.rve import FillerSpec, generate_rve
+from itr_surrogate import engine as eng
+from itr_surrogate.engine import RVEData, SolveEngine, SolveRequest, SolveStore
+
+MAT = Materials({"silicone": 0.18, "Al2O3": 30.0}, {("Al2O3", "silicone"): 2e-8},
+                matrix="silicone")
+
+
+@pytest.fixture(scope="module")
+def rves():
+    out = []
+    for seed in (1, 2):
+        ms = generate_rve([FillerSpec("Al2O3", mu=1.02, sigma=0.35, volume_fraction=0.5)],
+                          box_um=5.0, voxel_um=0.25, seed=seed, matrix="silicone",
+                          max_diameter_box_ratio=0.45)
+        out.append((ms, RVEData.of(ms)))
+    return out
+
+
+def _requests(rves, fields=False):
+    return [SolveRequest.for_materials(rve, MAT.with_parameters({"R_Al2O3_silicone": r}),
+                                       1e-9, fields=fields, replica=i)
+            for i, (_, rve) in enumerate(rves) for r in (1e-8, 1e-7)]
+
+
+def test_rve_data_rebuilds_the_same_voxels_and_has_a_stable_id(rves):
+    ms, rve = rves[0]
+    again = rve.microstructure()
+    assert np.array_equal(again.material_ids, ms.material_ids)
+    assert np.array_equal(again.particle_ids, ms.particle_ids)
+    assert RVEData.from_payload(rve.to_payload()).rve_id == rve.rve_id
+    assert rve.rve_id != rves[1][1].rve_id
+
+
+def test_request_keys_follow_parameters_tolerance_and_solver(rves):
+    rve = rves[0][1]
+    a = SolveRequest.for_materials(rve, MAT, 1e-8)
+    assert a.key == SolveRequest.for_materials(rve, MAT, 1e-8, purpose="other").key
+    assert a.key != SolveRequest.for_materials(rve, MAT, 1e-9).key
+    assert a.key != SolveRequest.for_materials(rve, MAT, 1e-8, solver="fv").key
+    assert a.key != SolveRequest.for_materials(
+        rve, MAT.with_parameters({"R_Al2O3_silicone": 2.1e-8}), 1e-8).key
+    with pytest.raises(ValueError, match="solver"):
+        SolveRequest.for_materials(rve, MAT, 1e-8, solver="gpu")
+
+
+def test_serial_results_are_the_solver_and_a_rerun_reuses_every_solve(rves, tmp_path):
+    reqs = _requests(rves, fields=True)
+    builds = eng.geometry_builds()
+    with SolveEngine(tmp_path / "store") as first:
+        got = first.solve(reqs)
+    assert first.solved == 4 and first.reused == 0
+    # one geometry per RVE, not one per solve
+    assert first.geometry_builds == 2 and eng.geometry_builds() - builds == 2
+    direct = itr_fft.homogenize(rves[1][0], reqs[3].materials(), tol=1e-9)
+    assert np.allclose(got[3].k_eff, direct.k_eff, rtol=1e-12, atol=0)
+    assert np.allclose(got[3].theta, np.stack(direct.theta), rtol=0, atol=1e-12)
+    assert SolveStore(tmp_path / "store").count() == 4
+    with SolveEngine(tmp_path / "store") as again:
+        back = again.solve(reqs)
+    assert again.solved == 0 and again.reused == 4
+    for a, b in zip(got, back):
+        assert np.array_equal(a.k_eff, b.k_eff) and np.array_equal(a.theta, b.theta)
+        assert np.array_equal(a.k_eff_energy, b.k_eff_energy) and b.cached
+    table = SolveStore(tmp_path / "store").table()
+    assert table.num_rows == 4 and set(table.column("replica").to_pylist()) == {0, 1}
+    assert "R_Al2O3_silicone" in table.column_names and "k_iso" in table.column_names
+
+
+def test_duplicate_requests_are_solved_once(rves):
+    req = _requests(rves)[0]
+    e = SolveEngine()
+    out = e.solve([req, req])
+    assert e.solved == 1 and np.array_equal(out[0].k_eff, out[1].k_eff)
+
+
+def test_a_local_cluster_gives_the_serial_numbers(rves, tmp_path):
+    reqs = _requests(rves)
+    serial = SolveEngine().solve(reqs)
+    with SolveEngine(tmp_path / "s", workers=2) as par:
+        dist = par.solve(reqs)
+        assert par.solved == 4
+        # each worker builds an RVE's geometry at most once
+        assert 2 <= par.geometry_builds <= 4
+    for a, b in zip(serial, dist):
+        assert np.array_equal(a.k_eff, b.k_eff)
+
+
+def test_bad_engine_arguments():
+    with pytest.raises(ValueError, match="workers"):
+        SolveEngine(workers=0)
+    with pytest.raises(ValueError, match="--scheduler: cannot reach"):
+        eng.open_client(None, "tcp://127.0.0.1:9", memory_per_worker=10**9)
