@@ -140,7 +140,14 @@ def register_backend(cls: type[Backend]) -> type[Backend]:
     return cls
 
 
+_ENTRY_POINTS_LOADED = {"done": False}
+
+
 def _load_entry_points() -> None:
+    """Register the installed backends (once per process: the scan costs milliseconds)."""
+    if _ENTRY_POINTS_LOADED["done"]:
+        return
+    _ENTRY_POINTS_LOADED["done"] = True
     for ep in importlib.metadata.entry_points(group=ENTRY_POINT_GROUP):
         if ep.name not in _REGISTRY:
             try:

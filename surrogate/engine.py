@@ -389,8 +389,6 @@ class SolveEngine:
     ----------
     solved, reused : int
         Solves run by this engine, and requests answered from the store.
-    geometry_builds : int
-        Discrete problems (face geometries) built for the solves, over all processes.
     """
 
     def __init__(self, store: str | Path | SolveStore | None = None, *,
@@ -405,7 +403,9 @@ class SolveEngine:
         self.scheduler = scheduler
         self.echo = echo
         self._client = self._cluster = None
-        self.solved = self.reused = self.geometry_builds = 0
+        self.solved = self.reused = 0
+        self._worker_builds = 0
+        self._local_builds0 = geometry_builds()
         if scheduler:  # refuse an unreachable scheduler before any work
             self._client, self._cluster = open_client(None, scheduler, memory_per_worker=1,
                                                       echo=echo)
@@ -456,7 +456,8 @@ class SolveEngine:
                 if self.store is not None:
                     self.store.put(first[key], res)
                 self.solved += 1
-                self.geometry_builds += int(res.geometry_built)
+                if self.distributed:
+                    self._worker_builds += int(res.geometry_built)
                 for i in todo[key]:
                     out[i] = res
                     if tick is not None:
@@ -490,6 +491,12 @@ class SolveEngine:
                 d["residual"], d["wall_s"],
                 None if d["theta"] is None else np.asarray(d["theta"]), False,
                 d["geometry_built"])
+
+    @property
+    def geometry_builds(self) -> int:
+        """Discrete problems built since this engine started: in this process (its solves
+        and the reduced bases' problems) plus those the workers report."""
+        return geometry_builds() - self._local_builds0 + self._worker_builds
 
     def summary(self) -> str:
         where = (f"scheduler {self.scheduler}" if self.scheduler else

@@ -43,7 +43,7 @@ def check_solver(choice: str, name: str = "solver") -> str:
     ValueError naming the argument ``name`` and the choices."""
     if isinstance(choice, str) and (choice in SOLVER_CHOICES or choice == "auto"
                                     or choice in available_backends()):
-        return choice
+        return choice  # (the short names first: no scan of the installed backends)
     names = ", ".join(repr(c) for c in (*SOLVER_CHOICES, "auto", *available_backends()))
     raise ValueError(f"{name}: expected one of {names}, got {choice!r}")
 

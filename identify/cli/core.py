@@ -23,6 +23,7 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 
 __all__ = ["CLIError", "Parser", "number", "FLAG_NAMES", "flagged", "output_folder",
+           "engine_arguments", "engine_options",
            "open_campaign", "rve_arguments", "forward_settings", "read_table",
            "identification_arguments", "reproduce_settings"]
 
@@ -108,7 +109,9 @@ def output_folder(path: str) -> Iterator[Path]:
     try:
         yield out
     except BaseException:
-        if created:
+        # a folder this run made goes again, unless it keeps finished full solves
+        # (out/solves) that a re-run reuses
+        if created and not (out / "solves").is_dir():
             shutil.rmtree(out, ignore_errors=True)
         raise
 
@@ -175,6 +178,22 @@ def read_table(path: str | None, reader: Callable):
                                            else msg), 2) from None
 
 
+def engine_arguments(p: argparse.ArgumentParser) -> None:
+    """--workers N and --scheduler ADDRESS: where the full solves run (read by
+    :func:`engine_options`)."""
+    p.add_argument("--workers", type=number(int, 1, 64, hi_open=False), default=None,
+                   help="run the full solves on a local Dask cluster of N processes "
+                   "(default: in this process, the fastest on 2 cores)")
+    p.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                   help="run the full solves on a running Dask scheduler "
+                   "(tcp://host:port)")
+
+
+def engine_options(args: argparse.Namespace) -> dict:
+    """``workers`` and ``scheduler`` of the solve engine from the command line."""
+    return {"workers": args.workers, "scheduler": args.scheduler}
+
+
 def identification_arguments(p: argparse.ArgumentParser) -> None:
     """The flags that ``itr reproduce`` and ``itr identify`` share (read by
     :func:`reproduce_settings`)."""
@@ -182,6 +201,7 @@ def identification_arguments(p: argparse.ArgumentParser) -> None:
                    help="area (the paper's per-area contact resistance), gap (physical "
                    "contacts) or both (default)")
     rve_arguments(p, box="12; --full 40", voxel="0.25; --full 0.1")
+    engine_arguments(p)
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
 
 

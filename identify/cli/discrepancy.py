@@ -5,7 +5,15 @@ from __future__ import annotations
 
 import argparse
 
-from .core import CLIError, forward_settings, output_folder, read_table, rve_arguments
+from .core import (
+    CLIError,
+    engine_arguments,
+    engine_options,
+    forward_settings,
+    output_folder,
+    read_table,
+    rve_arguments,
+)
 
 __all__ = ["add_parser"]
 
@@ -25,7 +33,8 @@ def _run(args: argparse.Namespace) -> int:
     except ValueError as exc:
         raise CLIError("--" + str(exc), 2) from None
     with output_folder(args.out) as out:
-        run_discrepancy(meas, settings, out, effects=effects, progress=not args.no_progress)
+        run_discrepancy(meas, settings, out, effects=effects, progress=not args.no_progress,
+                        **engine_options(args))
     return 0
 
 
@@ -47,5 +56,6 @@ def add_parser(sub) -> None:
     p.add_argument("--effects", default=None,
                    help="comma-separated candidates (default all): matrix, filler, porosity, "
                    "fraction, spots, tester")
+    engine_arguments(p)
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.set_defaults(func=_run)

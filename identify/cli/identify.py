@@ -4,7 +4,13 @@ from __future__ import annotations
 
 import argparse
 
-from .core import identification_arguments, output_folder, read_table, reproduce_settings
+from .core import (
+    engine_options,
+    identification_arguments,
+    output_folder,
+    read_table,
+    reproduce_settings,
+)
 
 __all__ = ["add_parser"]
 
@@ -17,7 +23,8 @@ def _run(args: argparse.Namespace) -> int:
     meas = read_table(args.measurements,
                       read_tester_readings if args.readings else read_measurements)
     with output_folder(args.out) as out:
-        run_identify(meas, settings, out, progress=not args.no_progress)
+        run_identify(meas, settings, out, progress=not args.no_progress,
+                     **engine_options(args))
     return 0
 
 

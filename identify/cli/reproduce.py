@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from .core import identification_arguments, output_folder, reproduce_settings
+from .core import engine_options, identification_arguments, output_folder, reproduce_settings
 
 __all__ = ["add_parser"]
 
@@ -14,7 +14,7 @@ def _run(args: argparse.Namespace) -> int:
 
     settings = reproduce_settings(args, full=args.full)
     with output_folder(args.out) as out:
-        run_reproduce(settings, out, progress=not args.no_progress)
+        run_reproduce(settings, out, progress=not args.no_progress, **engine_options(args))
     return 0
 
 

@@ -233,10 +233,9 @@ class ForwardModel:
         self.centre = {p: math.sqrt(lo * hi) for p, (lo, hi) in bounds.items()}
         mat = self.materials(self.centre)
         if bounds:
-            first = RVEData.of(self.microstructures[0])
-            # the reduced basis works on the engine's problem of replica 0 (one geometry)
-            problem = cached_problem(first, mat.contact)[0] if not self._engine.distributed \
-                else DiscreteProblem(self.microstructures[0], contact=mat.contact)
+            # the reduced basis works on this process's problem of replica 0, the one the
+            # engine's serial solves use too (one geometry)
+            problem = cached_problem(RVEData.of(self.microstructures[0]), mat.contact)[0]
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")  # VoxelContactWarning: the area model
                 self.rb = ReducedBasis(problem, mat, bounds, tol=s.rb_tol,

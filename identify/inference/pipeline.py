@@ -24,6 +24,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from itr_surrogate.engine import SolveEngine
+
 from ..forward.model import PARAMETRISATIONS, ForwardModel, ForwardSettings
 from .calibrate import Posterior, calibrate
 from .formulations import fractions_of
@@ -88,7 +90,8 @@ class Identification:
 def identify(measurements: Measurements, parametrisation: str = "gap", *,
              settings: ForwardSettings | None = None, grid_points: int = 121, seed: int = 0,
              reuse: Mapping[str, ForwardModel] | None = None, progress: bool = False,
-             echo: Callable[[str], None] = print) -> Identification:
+             echo: Callable[[str], None] = print,
+             engine: SolveEngine | None = None) -> Identification:
     """Calibrate and screen the interface parameters of one parametrisation.
 
     Parameters
@@ -110,6 +113,9 @@ def identify(measurements: Measurements, parametrisation: str = "gap", *,
         Progress bars (reduced-basis full solves).
     echo : callable
         Where one-line progress messages go.
+    engine : SolveEngine, optional
+        Where every full solve runs and is kept (:mod:`itr_surrogate.engine`; default:
+        this process, nothing kept).
     """
     if parametrisation not in PARAMETRISATIONS:
         raise ValueError(f"parametrisation: expected one of {sorted(PARAMETRISATIONS)}, got "
@@ -127,7 +133,7 @@ def identify(measurements: Measurements, parametrisation: str = "gap", *,
                 and not old.fixed):
             models[f] = old
         else:
-            models[f] = _build(f, comps[f], par, settings, None, progress, echo)
+            models[f] = _build(f, comps[f], par, settings, None, progress, echo, engine)
     seconds = {"single-filler models": time.perf_counter() - t0}
     t = time.perf_counter()
     post = _anchored(models, singles, measurements, grid_points, seed) if singles else None
@@ -137,7 +143,7 @@ def identify(measurements: Measurements, parametrisation: str = "gap", *,
     for f in multis:
         params = par.parameters(list(comps[f]))
         fixed = {p: central[p] for p in params if p in central}
-        models[f] = _build(f, comps[f], par, settings, fixed, progress, echo)
+        models[f] = _build(f, comps[f], par, settings, fixed, progress, echo, engine)
         if fixed:
             models[f].carried_scatter = _carried_scatter(models[f], post, seed)
     if any(models[f].rb is not None for f in multis):
@@ -180,8 +186,8 @@ def _carried_scatter(model: ForwardModel, posterior: Posterior, seed: int) -> fl
 
 def _build(name: str, fractions: dict[str, float], par, settings: ForwardSettings,
            fixed: dict[str, float] | None, progress: bool,
-           echo: Callable[[str], None]) -> ForwardModel:
-    m = ForwardModel(name, fractions, par, settings, fixed=dict(fixed or {}))
+           echo: Callable[[str], None], engine: SolveEngine | None) -> ForwardModel:
+    m = ForwardModel(name, fractions, par, settings, fixed=dict(fixed or {}), engine=engine)
     m.build(progress=progress)
     rb = (f"reduced basis {m.rb.n_solves_} full solves (gap {m.rb.training_gap_:.1e})"
           if m.rb is not None else "no parameter of its own")

@@ -16,15 +16,20 @@ from ..discrepancy.tables import build_tables, n_solves
 from ..inference.formulations import fractions_of
 from ..inference.measurements import Measurements
 from ..reporting.discrepancy_report import gap_figure, report_lines
+from .reproduce import open_engine
 
 __all__ = ["run_discrepancy"]
 
 
 def run_discrepancy(meas: Measurements, settings: DiscrepancySettings, out: Path, *,
                     effects: list | None = None, progress: bool = True,
-                    echo: Callable[[str], None] = print) -> Discrepancy:
+                    echo: Callable[[str], None] = print, workers: int | None = None,
+                    scheduler: str | None = None) -> Discrepancy:
     """The workflow on ``meas`` (``effects``: the candidates, default the whole library)
-    with its report in ``out``: discrepancy.md, .json, .png, manifest.json."""
+    with its report in ``out``: discrepancy.md, .json, .png, manifest.json. The forward
+    tables' full solves run on the solve engine (in this process, on ``workers`` local
+    processes or on the Dask ``scheduler``) and are kept in ``out/solves``: a re-run
+    (another table, or after a kill) redoes none that finished."""
     from tqdm.auto import tqdm
 
     out = Path(out)
@@ -32,10 +37,12 @@ def run_discrepancy(meas: Measurements, settings: DiscrepancySettings, out: Path
     comps = {f: fractions_of(f) for f in meas.formulations}
     singles = {f: c for f, c in comps.items() if len(c) == 1}
     effects = default_effects() if effects is None else list(effects)
-    with tqdm(total=n_solves(len(singles), settings, effects), desc="forward solves",
-              unit="solve", disable=not progress) as bar:
+    with open_engine(out, workers=workers, scheduler=scheduler, echo=echo) as engine, \
+            tqdm(total=n_solves(len(singles), settings, effects), desc="forward solves",
+                 unit="solve", disable=not progress) as bar:
         tables = build_tables(singles, settings=settings, effects=effects,
-                              tick=lambda: bar.update())
+                              tick=lambda: bar.update(), engine=engine)
+    echo(f"engine: {engine.summary()}")
     d = find_discrepancy(meas, settings=settings, tables=tables)
     files = [write_text(out / "discrepancy.json", json.dumps(d.to_dict(), indent=2) + "\n")]
     files.append(gap_figure(d, out / "discrepancy.png"))

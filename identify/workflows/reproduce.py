@@ -21,6 +21,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 from itr_fv.io import atomic_path, begin_run, write_manifest, write_text
+from itr_surrogate.engine import SolveEngine
 
 from ..forward.model import ForwardSettings
 from ..inference.measurements import Measurements, read_measurements
@@ -98,28 +99,46 @@ def _temperature_field(ident: Identification, formulation: str, out: Path) -> li
     return [Path(vti), Path(flux), Path(temp)]
 
 
+def open_engine(out: Path, *, workers: int | None = None, scheduler: str | None = None,
+                echo: Callable[[str], None] = print) -> SolveEngine:
+    """The solve engine of a run writing to ``out``: every full solve is kept in
+    ``out/solves`` (a re-run of a killed command redoes none that finished), run in this
+    process, on ``workers`` local processes or on the Dask ``scheduler``."""
+    return SolveEngine(Path(out) / "solves", workers=workers, scheduler=scheduler, echo=echo)
+
+
 def _identify_all(meas: Measurements, settings: ReproduceSettings, progress: bool,
-                  echo: Callable[[str], None]) -> dict[str, Identification]:
+                  echo: Callable[[str], None], engine: SolveEngine) -> dict[str, Identification]:
     idents = {}
     for par in settings.parametrisations:
         echo(f"{par}: RVEs, reduced bases and RVE scatter of {len(meas.formulations)} "
              "formulations")
         idents[par] = identify(meas, par, settings=settings.forward,
                                grid_points=settings.grid_points, seed=settings.seed,
-                               progress=False, echo=echo)
+                               progress=False, echo=echo, engine=engine)
         best = ", ".join(f"{n} {v:.2e}" for n, v in idents[par].posterior.best.items())
         echo(f"{par}: identified {best} (m^2 K/W)")
     return idents
 
 
 def run_reproduce(settings: ReproduceSettings, out: Path, *, progress: bool = True,
-                  echo: Callable[[str], None] = print) -> list[Path]:
-    """The whole pipeline on the shipped data; returns the files written (manifest last)."""
-    out = Path(out)
+                  echo: Callable[[str], None] = print, workers: int | None = None,
+                  scheduler: str | None = None) -> list[Path]:
+    """The whole pipeline on the shipped data; returns the files written (manifest last).
+
+    Every full solve runs on the solve engine (:func:`open_engine`: in this process, on
+    ``workers`` local processes or on the Dask ``scheduler``) and is kept in ``out/solves``.
+    """
+    with open_engine(out, workers=workers, scheduler=scheduler, echo=echo) as engine:
+        return _reproduce(settings, Path(out), progress, echo, engine)
+
+
+def _reproduce(settings: ReproduceSettings, out: Path, progress: bool,
+               echo: Callable[[str], None], engine: SolveEngine) -> list[Path]:
     begin_run(out)
     t0 = time.perf_counter()
     meas = read_measurements()
-    idents = _identify_all(meas, settings, progress, echo)
+    idents = _identify_all(meas, settings, progress, echo, engine)
     t_ident = time.perf_counter() - t0
     validation, lofo = {}, {}
     n_val = sum(len(i.models) for i in idents.values()) * settings.forward.replicas
@@ -150,7 +169,9 @@ def run_reproduce(settings: ReproduceSettings, out: Path, *, progress: bool = Tr
     files.append(write_text(out / "report.md", _reproduce_markdown(
         idents, meas, validation, lofo, psd_fits, timing, settings)))
     files.append(write_manifest(out, files, {"job": "reproduce", **settings.to_dict(),
-                                             "wall_s": round(wall, 1)}))
+                                             "wall_s": round(wall, 1),
+                                             "engine": engine.summary()}))
+    echo(f"engine: {engine.summary()}")
     echo(f"reproduce: done in {wall:.0f} s; wrote {len(files)} files to {out}")
     return files
 
@@ -223,12 +244,22 @@ def _reproduce_markdown(idents, meas, validation, lofo, psd_fits, timing, settin
 
 
 def run_identify(meas: Measurements, settings: ReproduceSettings, out: Path, *,
-                 progress: bool = True, echo: Callable[[str], None] = print) -> list[Path]:
-    """Identification of a user's measurement table; returns the files written."""
+                 progress: bool = True, echo: Callable[[str], None] = print,
+                 workers: int | None = None, scheduler: str | None = None) -> list[Path]:
+    """Identification of a user's measurement table; returns the files written. Full
+    solves as in :func:`run_reproduce` (kept in ``out/solves``)."""
     out = Path(out)
-    begin_run(out)
-    t0 = time.perf_counter()
-    idents = _identify_all(meas, settings, progress, echo)
+    with open_engine(out, workers=workers, scheduler=scheduler, echo=echo) as engine:
+        begin_run(out)
+        t0 = time.perf_counter()
+        idents = _identify_all(meas, settings, progress, echo, engine)
+        echo(f"engine: {engine.summary()}")
+    return _identify_report(meas, settings, out, idents, t0, echo)
+
+
+def _identify_report(meas: Measurements, settings: ReproduceSettings, out: Path,
+                     idents: dict[str, Identification], t0: float,
+                     echo: Callable[[str], None]) -> list[Path]:
     data = {p: report.identified_dict(i) for p, i in idents.items()}
     if len(idents) > 1:
         data["selection"] = report.selection(idents)
