@@ -45,7 +45,7 @@ from .solver_choice import check_solver, solver_backend
 from .store import rve_id
 
 __all__ = ["RVEData", "SolveRequest", "SolveResult", "SolveStore", "SolveEngine",
-           "open_client", "geometry_builds"]
+           "open_client", "geometry_builds", "clear_problem_cache"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -199,6 +199,11 @@ _BUILDS = {"count": 0}
 def geometry_builds() -> int:
     """Discrete problems (face geometries) this process has built for the engine."""
     return _BUILDS["count"]
+
+
+def clear_problem_cache() -> None:
+    """Forget this process's discrete problems (the next solve of an RVE builds it again)."""
+    _PROBLEMS.clear()
 
 
 def cached_problem(rve: RVEData, contact: str) -> tuple[DiscreteProblem, bool]:

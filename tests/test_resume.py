@@ -18,7 +18,7 @@ from pathlib import Path
 import pytest
 
 from itr_identify.cli import main
-from itr_surrogate.engine import SolveStore
+from itr_surrogate.engine import SolveStore, clear_problem_cache
 
 BIN = Path(sys.executable).parent
 #: CI size: gap parametrisation only, 24^3 voxels, two replicas, no leave-one-out.
@@ -89,6 +89,7 @@ def _run_and_kill(args: list[str], out: Path, after_solves: int) -> int:
 @pytest.fixture(scope="module")
 def serial_reproduce(tmp_path_factory):
     out = tmp_path_factory.mktemp("serial") / "rep"
+    clear_problem_cache()  # earlier tests of this process may have built the same RVEs
     assert main([*REPRODUCE, "--out", str(out)]) == 0
     return out, _strip(json.loads((out / "identified.json").read_text()))
 
