@@ -42,7 +42,7 @@ from itr_fv.microstructure import Microstructure
 from itr_fv.problem import DiscreteProblem
 
 from .solver_choice import check_solver, solver_backend
-from .store import rve_id
+from .store import rve_id, tensor_columns, tensor_of
 
 __all__ = ["RVEData", "SolveRequest", "SolveResult", "SolveStore", "SolveEngine",
            "open_client", "geometry_builds", "clear_problem_cache"]
@@ -250,7 +250,7 @@ def _run_payload(payload: dict) -> dict:
     res = run_request(req, threads=1)
     return {"k_eff": res.k_eff.tolist(), "k_eff_energy": res.k_eff_energy.tolist(),
             "iterations": res.iterations, "residual": res.residual, "wall_s": res.wall_s,
-            "theta": None if res.theta is None else res.theta, "geometry_built":
+            "theta": res.theta, "geometry_built":
             res.geometry_built, "worker_pid": os.getpid()}
 
 
@@ -288,7 +288,7 @@ class SolveStore:
             with np.load(fpath, allow_pickle=False) as data:
                 theta = data["theta"]
         row = pq.read_table(path).to_pylist()[0]
-        k = np.array([[row[f"k_{a}{b}"] for b in "xyz"] for a in "xyz"])
+        k = tensor_of(row)
         ke = np.array(json.loads(row["k_energy_json"]))
         return SolveResult(k, ke, json.loads(row["iterations_json"]), row["residual"],
                            row["wall_s"], theta, True, False)
@@ -310,11 +310,8 @@ class SolveStore:
         row.update({str(k): (json.dumps(v) if isinstance(v, (list, dict)) else v)
                     for k, v in request.labels.items()})
         row.update({k: float(v) for k, v in sorted(request.parameters.items())})
-        for a, ax in enumerate("xyz"):
-            for b, bx in enumerate("xyz"):
-                row[f"k_{ax}{bx}"] = float(result.k_eff[a, b])
-        row.update({"k_iso": float(np.trace(result.k_eff) / 3.0),
-                    "k_energy_json": json.dumps(np.asarray(result.k_eff_energy).tolist()),
+        row.update(tensor_columns(result.k_eff))
+        row.update({"k_energy_json": json.dumps(np.asarray(result.k_eff_energy).tolist()),
                     "iterations": int(max(result.iterations, default=0)),
                     "iterations_json": json.dumps([int(i) for i in result.iterations]),
                     "residual": float(result.residual), "wall_s": float(result.wall_s)})

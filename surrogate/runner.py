@@ -27,7 +27,7 @@ import numpy as np
 from itr_fv.parameters import parse_parameter
 
 from .campaign import Campaign, CampaignError, Task, nearest_solved
-from .store import CampaignStore, rve_id
+from .store import CampaignStore, rve_id, tensor_columns
 
 __all__ = ["run_campaign", "run_task", "build_rve", "RunSummary", "worker_memory"]
 
@@ -121,10 +121,8 @@ def _row(camp: Campaign, task: Task, index: int, rid: str, mat, res, wall: float
     phases = {camp.matrix, *camp.formulation(task.formulation).fractions}
     row.update({name: float(v) for name, v in sorted(mat.to_parameters().items())
                 if set(parse_parameter(name)[1]) <= phases})
-    for a, ax in enumerate("xyz"):
-        for b, bx in enumerate("xyz"):
-            row[f"k_{ax}{bx}"] = float(k[a, b])
-    row.update({"k_iso": float(np.trace(k) / 3.0), "iterations": int(max(res.iterations)),
+    row.update(tensor_columns(k))
+    row.update({"iterations": int(max(res.iterations)),
                 "iterations_total": int(sum(res.iterations)),
                 "residual": float(max(res.residuals)), "warm_start": warm, "wall_s": wall})
     return row

@@ -28,10 +28,24 @@ from itr_fv.io import atomic_path, write_text
 
 from .campaign import Campaign, CampaignError
 
-__all__ = ["CampaignStore", "CampaignStatus", "rve_id", "RESULT_KEY"]
+__all__ = ["CampaignStore", "CampaignStatus", "rve_id", "RESULT_KEY", "tensor_columns",
+           "tensor_of"]
 
 #: Columns that identify a row (one solve) of a campaign.
 RESULT_KEY = ("formulation", "replica", "set_index")
+
+
+def tensor_columns(k: np.ndarray) -> dict[str, float]:
+    """The 3x3 tensor (W/(m K)) as the row columns ``k_xx`` ... ``k_zz`` and ``k_iso``."""
+    row = {f"k_{ax}{bx}": float(k[a, b]) for a, ax in enumerate("xyz")
+           for b, bx in enumerate("xyz")}
+    row["k_iso"] = float(np.trace(k) / 3.0)
+    return row
+
+
+def tensor_of(row: dict) -> np.ndarray:
+    """The 3x3 tensor of a row written with :func:`tensor_columns`."""
+    return np.array([[row[f"k_{a}{b}"] for b in "xyz"] for a in "xyz"])
 
 
 def rve_id(centers_m: np.ndarray, radii_m: np.ndarray, materials: list[str],
