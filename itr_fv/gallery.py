@@ -23,14 +23,16 @@ import numpy as np
 
 from .materials import Materials
 from .microstructure import Microstructure
+from .paper_data import PAPER_SYSTEM
 
 __all__ = ["RVECase", "rve_cases", "build", "K_SILICONE", "K_AL2O3", "K_ALN", "PSD"]
 
-K_SILICONE = 0.18   # W/(m K)
-K_AL2O3 = 30.0
-K_ALN = 200.0
+#: the paper's conductivities, W/(m K) (:data:`itr_fv.paper_data.PAPER_SYSTEM`)
+K_SILICONE = PAPER_SYSTEM.matrix_conductivity
+K_AL2O3 = PAPER_SYSTEM.filler("Al2O3").conductivity
+K_ALN = PAPER_SYSTEM.filler("AlN").conductivity
 #: lognormal number-weighted diameter distributions, ln(D / 1 um): (mu, sigma) of Table 1
-PSD = {"Al2O3": (1.02, 0.35), "AlN": (1.25, 0.59)}
+PSD = {name: (p.mu, p.sigma) for name, p in PAPER_SYSTEM.size_distributions().items()}
 UM = 1e-6
 
 
@@ -66,8 +68,7 @@ class RVECase:
 
 
 def _mat(resistance: dict, fillers: tuple[str, ...] = ("Al2O3",)) -> Materials:
-    k = {"silicone": K_SILICONE}
-    k.update({f: {"Al2O3": K_AL2O3, "AlN": K_ALN}[f] for f in fillers})
+    k = PAPER_SYSTEM.conductivities(fillers)
     return Materials(k, resistance, matrix="silicone", contact="area")
 
 

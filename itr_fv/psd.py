@@ -21,7 +21,7 @@ from scipy import optimize, special
 
 from .checks import finite_number as _finite
 
-__all__ = ["LogNormalPSD", "HistogramFit", "TABLE1", "fit_histogram", "fit_sample",
+__all__ = ["LogNormalPSD", "HistogramFit", "fit_histogram", "fit_sample",
            "fit_truncated_sample", "histogram_from_sample", "phi_rcp_lognormal",
            "plot_histogram_fit"]
 
@@ -175,13 +175,6 @@ class LogNormalPSD:
         def cdf(d: np.ndarray) -> np.ndarray:
             return np.clip((self.cdf(d) - fl) / (fh - fl), 0.0, 1.0)
         return cdf
-
-
-#: Table 1 of the paper (number-weighted, parameters of ln(D / 1 um)).
-TABLE1: dict[str, LogNormalPSD] = {
-    "Al2O3": LogNormalPSD(1.02, 0.35, "number"),
-    "AlN": LogNormalPSD(1.25, 0.59, "number"),
-}
 
 
 def phi_rcp_lognormal(sigma: float) -> float:

@@ -43,6 +43,7 @@ import time
 import warnings
 from collections.abc import Iterable, Sequence
 from dataclasses import asdict, dataclass, field
+from typing import NamedTuple
 
 import numpy as np
 from scipy import special, stats
@@ -50,15 +51,17 @@ from scipy import special, stats
 from .checks import finite_number as _num
 from .microstructure import Microstructure
 from .packing import pack_spheres, pairs_within_gap
+from .paper_data import TABLE1
 from .psd import (
-    TABLE1,
     LogNormalPSD,
     fit_sample,
     fit_truncated_sample,
     phi_rcp_lognormal,
 )
+from .rve_spec import RVESpec, voxels_per_edge
 
-__all__ = ["FillerSpec", "FillerReport", "RVEReport", "generate_rve", "packing_limit"]
+__all__ = ["FillerSpec", "FillerReport", "RVEReport", "generate_rve", "packing_limit",
+           "build_rve", "PackedRVE"]
 
 
 @dataclass(frozen=True)
@@ -424,15 +427,8 @@ def generate_rve(specs: Sequence[FillerSpec] | FillerSpec, box_um: float, voxel_
     for s in specs:
         if not isinstance(s, FillerSpec):
             raise ValueError(f"specs: expected FillerSpec items, got {type(s).__name__}")
-    L = _num(box_um, "box_um")
-    if L <= 0:
-        raise ValueError(f"box_um must be > 0 um, got {box_um!r}")
-    h = _num(voxel_um, "voxel_um")
-    if h <= 0:
-        raise ValueError(f"voxel_um must be > 0 um, got {voxel_um!r}")
-    nvox = int(round(L / h))
-    if nvox < 1 or abs(nvox * h - L) > 1e-9 * L:
-        raise ValueError(f"voxel_um: box_um / voxel_um = {L / h:.6g} is not an integer")
+    nvox = voxels_per_edge(box_um, voxel_um)
+    L, h = float(box_um), float(voxel_um)
     if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
         raise ValueError(f"seed: expected a non-negative integer, got {seed!r}")
     gap = _num(min_gap_um, "min_gap_um")
@@ -584,3 +580,64 @@ def generate_rve(specs: Sequence[FillerSpec] | FillerSpec, box_um: float, voxel_
                       "voxelize": t_vox, "report": time.perf_counter() - t3,
                       "total": time.perf_counter() - t_start}
     return ms, report
+
+
+class PackedRVE(NamedTuple):
+    """An RVE of :func:`build_rve` and the packing seed that made it."""
+
+    microstructure: Microstructure
+    seed: int
+
+
+def build_rve(spec: RVESpec, fillers: Sequence[FillerSpec] | FillerSpec, replica: int, *,
+              matrix: str = "silicone", warn_box_cut: bool = True) -> PackedRVE:
+    """Pack replica ``replica`` of an RVE: the package's one way to build one.
+
+    Parameters
+    ----------
+    spec : RVESpec
+        Box, voxel, size cuts, matrix film and the seed of replica 0.
+    fillers : FillerSpec or sequence of FillerSpec
+        Filler types with their size distributions and volume fractions.
+    replica : int
+        Replica number (>= 0): packing seed ``spec.seed + replica``.
+    matrix : str
+        Name of the matrix phase.
+    warn_box_cut : bool
+        Let :func:`generate_rve`'s warning about the box cutting the coarse tail through
+        (False where the caller reports the cut itself).
+
+    Returns
+    -------
+    PackedRVE
+        ``(microstructure, seed)``. A packing that does not reach the fractions (dense
+        fillers, small boxes) is redrawn with the next seed of :meth:`RVESpec.seeds`
+        (``+ 100`` each time); ``seed`` is the one that succeeded.
+
+    Raises
+    ------
+    ValueError
+        Bad fillers for this box and voxel (see :func:`generate_rve`).
+    RuntimeError
+        No packing succeeded in :data:`~itr_fv.rve_spec.PACKING_ATTEMPTS` draws.
+    """
+    if not isinstance(spec, RVESpec):
+        raise ValueError(f"spec: expected an RVESpec, got {type(spec).__name__}")
+    *retries, last = spec.seeds(replica)
+
+    def pack(seed: int) -> PackedRVE:
+        with warnings.catch_warnings():
+            if not warn_box_cut:
+                warnings.simplefilter("ignore", UserWarning)
+            ms = generate_rve(fillers, box_um=spec.box_um, voxel_um=spec.voxel_um, seed=seed,
+                              min_gap_um=spec.min_gap_um, matrix=matrix,
+                              tail_quantile=spec.tail_quantile,
+                              max_diameter_box_ratio=spec.max_diameter_box_ratio)
+        return PackedRVE(ms, seed)
+
+    for seed in retries:
+        try:
+            return pack(seed)
+        except RuntimeError:
+            continue
+    return pack(last)

@@ -54,12 +54,12 @@ from typing import Any
 
 import numpy as np
 
-from itr_fv import Materials
-from itr_fv.psd import TABLE1
+from itr_fv import Materials, paper_data
+from itr_fv.paper_data import PAPER_SYSTEM, TABLE1
 from itr_fv.rve import FillerSpec, packing_limit
+from itr_fv.rve_spec import RVESpec
 
 from . import design as designs
-from . import paper_data
 from .solver_choice import check_solver
 
 __all__ = ["Campaign", "Formulation", "Task", "CampaignError", "PAPER_BASE", "nearest_solved"]
@@ -72,6 +72,8 @@ _TOP_KEYS = {"name", "box_um", "voxel_um", "replicas", "seed", "contact", "solve
              "matrix", "base", "formulation", "design"}
 _DESIGN_KEYS = {"table4": {"kind"}, "grid": {"kind", "values"},
                 "space_filling": {"kind", "n", "seed", "bounds"}}
+#: The file's keys that make its :class:`~itr_fv.rve_spec.RVESpec`.
+_RVE_KEYS = ("box_um", "voxel_um", "seed", "max_diameter_box_ratio", "min_gap_um")
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9.+-]*$")
 
 
@@ -110,20 +112,25 @@ class Campaign:
 
     formulations: tuple[Formulation, ...]
     design: dict[str, Any]
-    box_um: float
-    voxel_um: float
+    rve: RVESpec
     name: str = "campaign"
     replicas: int = 1
-    seed: int = 1
     contact: str = "gap"
     solver: str = "fft"
     tol: float = 1e-6
     block_size: int = 8
-    max_diameter_box_ratio: float = 0.45
-    min_gap_um: float = 0.0
     threads_per_worker: int = 1
-    matrix: str = "silicone"
+    matrix: str = PAPER_SYSTEM.matrix
     base: dict[str, float] = field(default_factory=dict)
+
+    # the RVE's fields, read through (the specification holds and checks them)
+    box_um = property(lambda self: self.rve.box_um, doc="RVE edge, um.")
+    voxel_um = property(lambda self: self.rve.voxel_um, doc="Voxel edge, um.")
+    seed = property(lambda self: self.rve.seed, doc="Packing seed of replica 0.")
+    max_diameter_box_ratio = property(lambda self: self.rve.max_diameter_box_ratio,
+                                      doc="Largest particle diameter / box edge.")
+    min_gap_um = property(lambda self: self.rve.min_gap_um,
+                          doc="Thinnest matrix film between two particles, um.")
 
     # ------------------------------------------------------------------ reading
     @classmethod
@@ -152,10 +159,15 @@ class Campaign:
         for key in ("box_um", "voxel_um", "formulation", "design"):
             if key not in data:
                 raise CampaignError(f"missing key {key!r}")
-        scalars = {k: v for k, v in data.items() if k not in ("formulation", "design", "base")}
+        scalars = {k: v for k, v in data.items()
+                   if k not in ("formulation", "design", "base", *_RVE_KEYS)}
+        try:
+            rve = RVESpec(**{k: data[k] for k in _RVE_KEYS if k in data})
+        except ValueError as exc:
+            raise CampaignError(str(exc)) from None
         camp = cls(formulations=tuple(_formulation(f, i)
                                       for i, f in enumerate(_list(data["formulation"]))),
-                   design=_design(data["design"]),
+                   design=_design(data["design"]), rve=rve,
                    base={**PAPER_BASE, **_base(data.get("base", {}))}, **scalars)
         camp.check()
         return camp
@@ -163,6 +175,8 @@ class Campaign:
     def to_dict(self) -> dict[str, Any]:
         """Plain JSON-able form; ``from_dict(to_dict())`` gives the same campaign."""
         d = asdict(self)
+        del d["rve"]
+        d.update({k: getattr(self.rve, k) for k in _RVE_KEYS})
         d["formulation"] = [{"name": f.name, "fractions": f.fractions,
                              "psd": {k: list(v) for k, v in f.psd.items()}}
                             for f in self.formulations]
@@ -177,15 +191,10 @@ class Campaign:
     # ----------------------------------------------------------------- checking
     def check(self) -> None:
         """Every value and every parameter set, before any work (CampaignError)."""
-        _positive(self.box_um, "box_um")
-        _positive(self.voxel_um, "voxel_um")
-        n = self.box_um / self.voxel_um
-        if abs(n - round(n)) > 1e-9 * n or round(n) < 4:
-            raise CampaignError(f"voxel_um: box_um / voxel_um = {n:.6g} must be a whole "
-                                "number >= 4")
+        if not isinstance(self.rve, RVESpec):
+            raise CampaignError(f"rve: expected an RVESpec, got {type(self.rve).__name__}")
         for key in ("replicas", "block_size", "threads_per_worker"):
             _whole(getattr(self, key), key, 1)
-        _whole(self.seed, "seed", 0)
         if self.contact not in ("gap", "area"):
             raise CampaignError(f"contact: expected 'gap' or 'area', got {self.contact!r}")
         try:
@@ -195,12 +204,6 @@ class Campaign:
         if not (isinstance(self.tol, (int, float)) and 1e-12 <= self.tol < 1):
             raise CampaignError(f"tol: expected a relative residual in [1e-12, 1), got "
                                 f"{self.tol!r}")
-        if not (isinstance(self.max_diameter_box_ratio, (int, float))
-                and 0 < self.max_diameter_box_ratio < 0.5):
-            raise CampaignError("max_diameter_box_ratio: expected a value in (0, 0.5), got "
-                                f"{self.max_diameter_box_ratio!r}")
-        if not (isinstance(self.min_gap_um, (int, float)) and self.min_gap_um >= 0):
-            raise CampaignError(f"min_gap_um: expected >= 0 um, got {self.min_gap_um!r}")
         if not isinstance(self.name, str) or not _NAME.match(self.name):
             raise CampaignError(f"name: letters, digits and . + - only, got {self.name!r}")
         if not self.formulations:
@@ -247,8 +250,7 @@ class Campaign:
     # ------------------------------------------------------------------ content
     @property
     def shape(self) -> tuple[int, int, int]:
-        n = int(round(self.box_um / self.voxel_um))
-        return (n, n, n)
+        return self.rve.shape
 
     def formulation(self, name: str) -> Formulation:
         for f in self.formulations:
@@ -299,12 +301,6 @@ def _list(value: Any) -> list:
     if not isinstance(value, list):
         raise CampaignError("formulation: expected [[formulation]] tables")
     return value
-
-
-def _positive(value: Any, key: str) -> None:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) \
-            or not math.isfinite(value) or value <= 0:
-        raise CampaignError(f"{key}: expected a number > 0, got {value!r}")
 
 
 def _whole(value: Any, key: str, low: int) -> None:

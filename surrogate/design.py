@@ -21,9 +21,8 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
+from itr_fv import paper_data
 from itr_fv.parameters import is_log_scaled, parameter_name, parse_parameter
-
-from . import paper_data
 
 __all__ = ["grid", "table4", "space_filling", "TABLE4_HYBRID_K"]
 

@@ -24,6 +24,7 @@ import hashlib
 import json
 import math
 import os
+import threading
 import time
 import warnings
 from collections import OrderedDict
@@ -45,7 +46,7 @@ from .solver_choice import check_solver, solver_backend
 from .store import rve_id, tensor_columns, tensor_of
 
 __all__ = ["RVEData", "SolveRequest", "SolveResult", "SolveStore", "SolveEngine",
-           "open_client", "geometry_builds", "clear_problem_cache"]
+           "open_client", "geometry_builds", "clear_problem_cache", "solve_row"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -260,6 +261,31 @@ def _payload(req: SolveRequest) -> dict:
             "fields": req.fields, "labels": dict(req.labels)}
 
 
+def solve_row(request: SolveRequest, result: SolveResult) -> dict[str, Any]:
+    """One finished solve as the store's row: the request's key, RVE, contact, solver and
+    tolerance, its labels, the flat parameters, the tensor (:func:`tensor_columns`),
+    iterations, residual and wall time (the campaign row's columns where they are shared).
+    The one record format of a full solve: the store writes it and a run's
+    ``full_solves.parquet`` lists it."""
+    from itr_fv import __version__
+
+    row: dict[str, Any] = {"key": request.key, "rve_id": request.rve.rve_id,
+                           "n": request.rve.shape[0],
+                           "voxel_um": request.rve.box_m / request.rve.shape[0] * 1e6,
+                           "box_um": request.rve.box_m * 1e6, "contact": request.contact,
+                           "solver": request.solver, "tol": request.tol,
+                           "package_version": __version__}
+    row.update({str(k): (json.dumps(v) if isinstance(v, (list, dict)) else v)
+                for k, v in request.labels.items()})
+    row.update({k: float(v) for k, v in sorted(request.parameters.items())})
+    row.update(tensor_columns(result.k_eff))
+    row.update({"k_energy_json": json.dumps(np.asarray(result.k_eff_energy).tolist()),
+                "iterations": int(max(result.iterations, default=0)),
+                "iterations_json": json.dumps([int(i) for i in result.iterations]),
+                "residual": float(result.residual), "wall_s": float(result.wall_s)})
+    return row
+
+
 # ---------------------------------------------------------------- the store
 class SolveStore:
     """Finished solves in a folder: ``solves/<key>.parquet`` (one row each) and
@@ -300,21 +326,7 @@ class SolveStore:
             self._field_path(key).parent.mkdir(parents=True, exist_ok=True)
             with atomic_path(self._field_path(key)) as tmp, open(tmp, "wb") as fh:
                 np.savez(fh, theta=result.theta)
-        from itr_fv import __version__
-        row: dict[str, Any] = {"key": key, "rve_id": request.rve.rve_id,
-                               "n": request.rve.shape[0],
-                               "voxel_um": request.rve.box_m / request.rve.shape[0] * 1e6,
-                               "box_um": request.rve.box_m * 1e6, "contact": request.contact,
-                               "solver": request.solver, "tol": request.tol,
-                               "package_version": __version__}
-        row.update({str(k): (json.dumps(v) if isinstance(v, (list, dict)) else v)
-                    for k, v in request.labels.items()})
-        row.update({k: float(v) for k, v in sorted(request.parameters.items())})
-        row.update(tensor_columns(result.k_eff))
-        row.update({"k_energy_json": json.dumps(np.asarray(result.k_eff_energy).tolist()),
-                    "iterations": int(max(result.iterations, default=0)),
-                    "iterations_json": json.dumps([int(i) for i in result.iterations]),
-                    "residual": float(result.residual), "wall_s": float(result.wall_s)})
+        row = solve_row(request, result)
         path = self._row_path(key)
         path.parent.mkdir(parents=True, exist_ok=True)
         with atomic_path(path) as tmp:
@@ -405,6 +417,7 @@ class SolveEngine:
         self.scheduler = scheduler
         self.echo = echo
         self._client = self._cluster = None
+        self._lock = threading.Lock()  # models may be built from several threads
         self.solved = self.reused = 0
         self._worker_builds = 0
         self._local_builds0 = geometry_builds()
@@ -417,12 +430,13 @@ class SolveEngine:
         return bool(self.workers or self.scheduler)
 
     def _ensure_client(self, shape: Sequence[int]):
-        if self._client is None:
-            from itr_fv.resources import estimate_peak_memory
-            need = int(estimate_peak_memory(shape, "itr_fft", store_fields=True) + 1e9)
-            self._client, self._cluster = open_client(self.workers, self.scheduler,
-                                                      memory_per_worker=need, echo=self.echo)
-        return self._client
+        with self._lock:
+            if self._client is None:
+                from itr_fv.resources import estimate_peak_memory
+                need = int(estimate_peak_memory(shape, "itr_fft", store_fields=True) + 1e9)
+                self._client, self._cluster = open_client(
+                    self.workers, self.scheduler, memory_per_worker=need, echo=self.echo)
+            return self._client
 
     def close(self) -> None:
         if self._client is not None:
@@ -447,7 +461,8 @@ class SolveEngine:
             hit = self.store.get(req) if self.store is not None else None
             if hit is not None:
                 out[i] = hit
-                self.reused += 1
+                with self._lock:
+                    self.reused += 1
                 if tick is not None:
                     tick()
             else:
@@ -457,9 +472,10 @@ class SolveEngine:
             for key, res in self._run(first):
                 if self.store is not None:
                     self.store.put(first[key], res)
-                self.solved += 1
-                if self.distributed:
-                    self._worker_builds += int(res.geometry_built)
+                with self._lock:
+                    self.solved += 1
+                    if self.distributed:
+                        self._worker_builds += int(res.geometry_built)
                 for i in todo[key]:
                     out[i] = res
                     if tick is not None:

@@ -17,7 +17,6 @@ block from the same cold start.
 from __future__ import annotations
 
 import time
-import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -25,11 +24,12 @@ from pathlib import Path
 import numpy as np
 
 from itr_fv.parameters import parse_parameter
+from itr_fv.rve import PackedRVE, build_rve
 
 from .campaign import Campaign, CampaignError, Task, nearest_solved
 from .store import CampaignStore, rve_id, tensor_columns
 
-__all__ = ["run_campaign", "run_task", "build_rve", "RunSummary", "worker_memory"]
+__all__ = ["run_campaign", "run_task", "campaign_rve", "RunSummary", "worker_memory"]
 
 
 @dataclass(frozen=True)
@@ -50,25 +50,17 @@ def _backend(camp: Campaign):
     return solver_backend(camp.solver, camp.shape, threads=camp.threads_per_worker)
 
 
-def _build_rve(camp: Campaign, task: Task):
-    from itr_fv.rve import generate_rve
-
-    form = camp.formulation(task.formulation)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", UserWarning)  # the box cut: reported by the report
-        return generate_rve(form.specs(), box_um=camp.box_um, voxel_um=camp.voxel_um,
-                            seed=task.seed, min_gap_um=camp.min_gap_um, matrix=camp.matrix,
-                            max_diameter_box_ratio=camp.max_diameter_box_ratio)
-
-
-def build_rve(camp: Campaign, formulation: str, replica: int):
-    """The RVE (Microstructure) that a campaign's tasks solve for one formulation and replica:
-    packed from the same seed, so the same particles as in the campaign's results."""
-    for task in camp.tasks():
-        if task.formulation == formulation and task.replica == replica:
-            return _build_rve(camp, task)
-    raise ValueError(f"formulation/replica: the campaign {camp.name!r} has no RVE "
-                     f"({formulation!r}, replica {replica})")
+def campaign_rve(camp: Campaign, formulation: str, replica: int) -> PackedRVE:
+    """The RVE that a campaign's tasks solve for one formulation and replica
+    (:func:`itr_fv.rve.build_rve` of the campaign's RVE specification: the same particles
+    as in the campaign's results) and the packing seed that made it."""
+    if formulation not in {f.name for f in camp.formulations} or not (
+            isinstance(replica, int) and 0 <= replica < camp.replicas):
+        raise ValueError(f"formulation/replica: the campaign {camp.name!r} has no RVE "
+                         f"({formulation!r}, replica {replica})")
+    # the box cut of the coarse tail: reported by the report, not a warning per task
+    return build_rve(camp.rve, camp.formulation(formulation).specs(), replica,
+                     matrix=camp.matrix, warn_box_cut=False)
 
 
 def run_task(campaign: dict, task: dict, folder: str) -> dict:
@@ -85,12 +77,12 @@ def run_task(campaign: dict, task: dict, folder: str) -> dict:
     camp = Campaign.from_dict(campaign)
     task = Task(**{**task, "set_indices": tuple(task["set_indices"])})
     store = CampaignStore(folder)
-    ms = _build_rve(camp, task)
+    ms, seed = campaign_rve(camp, task.formulation, task.replica)
     table = ms.particles
     rid = rve_id(table.centers_m, table.radii_m, list(table.material), ms.shape, ms.voxel_m)
     store.write_rve(rid, table.centers_m, table.radii_m, list(table.material),
                     {"formulation": task.formulation, "replica": task.replica,
-                     "seed": task.seed, "box_um": camp.box_um, "voxel_um": camp.voxel_um,
+                     "seed": seed, "box_um": camp.box_um, "voxel_um": camp.voxel_um,
                      "shape": list(ms.shape), "matrix": camp.matrix})
     problem = DiscreteProblem(ms, contact=camp.contact)
     backend = _backend(camp)
@@ -106,7 +98,8 @@ def run_task(campaign: dict, task: dict, folder: str) -> dict:
         wall = time.perf_counter() - t
         solved.append(pset)
         thetas.append(np.stack(res.theta))
-        rows.append(_row(camp, task, i, rid, mat, res, wall, near is not None, __version__))
+        rows.append(_row(camp, task, i, rid, mat, res, wall, near is not None, __version__)
+                    | {"seed": seed})
     store.write_part(task.task_id, rows)
     return {"task_id": task.task_id, "solves": len(rows), "wall_s": time.perf_counter() - t0}
 

@@ -198,4 +198,8 @@ def test_pyproject_lists_every_package():
     assert set(st["packages"]) == on_disk
     assert len(st["packages"]) == len(set(st["packages"]))
     assert conf["project"]["scripts"]["itr"] == "itr_identify.cli:main"
-    assert "itr_surrogate" in conf["tool"]["setuptools"]["package-data"]
+    # the paper's tables and materials are shipped in itr_fv/data (the bottom layer)
+    data = conf["tool"]["setuptools"]["package-data"]
+    assert data == {"itr_fv": ["data/*.csv", "data/README.md"]}
+    assert {p.name for p in (ROOT / "itr_fv" / "data").glob("*.csv")} >= {
+        "psd_lognormal.csv", "conductivities.csv", "measured_tc.csv"}

@@ -37,7 +37,7 @@ BAD = [
     (["demo", "--tol", "2"], 2, "argument --tol"),
     (["demo", "--box-um", "-3"], 2, "argument --box-um"),
     (["demo", "--voxel-um", "nan"], 2, "--voxel-um: must be finite"),
-    (["demo", "--voxel-um", "0.17"], 2, "--voxel-um: the box"),
+    (["demo", "--voxel-um", "0.17"], 2, "box_um/voxel_um: a 16 um box holds 94.1176 voxels"),
     (["demo", "--voxel-um", "0.016"], 2, "beyond the demo's 512^3"),
     (["demo", "--seed", "-1"], 2, "argument --seed"),
     (["demo", "--solver", "gpu"], 2, "invalid choice: 'gpu'"),
@@ -73,10 +73,10 @@ def test_runtime_failures_are_one_line_status_1_and_remove_the_new_folder(tmp_pa
 
 
 def test_convergence_failure_is_one_line(monkeypatch, tmp_path, capsys):
-    import itr_fft
-    real = itr_fft.homogenize
-    monkeypatch.setattr(itr_fft, "homogenize", lambda ms, mat, tol: real(ms, mat, tol=tol,
-                                                                          maxiter=2))
+    from itr_fv import solve
+    real = solve.homogenize
+    monkeypatch.setattr(solve, "homogenize",
+                        lambda *args, **kwargs: real(*args, **{**kwargs, "maxiter": 2}))
     status = main(["demo", "--box-um", "4", "--voxel-um", "0.25", "--fraction", "0.3",
                    "--out", str(tmp_path / "run")])
     err = capsys.readouterr().err.strip().splitlines()

@@ -14,8 +14,9 @@ import warnings
 import numpy as np
 import pytest
 
-from itr_fv import Microstructure
+from itr_fv import Microstructure, paper_data
 from itr_fv.rve import FillerSpec, generate_rve
+from itr_fv.rve_spec import RVESpec
 from itr_identify.cli import main
 from itr_identify.discrepancy import effects as fx
 from itr_identify.discrepancy.decision import find_discrepancy
@@ -24,10 +25,9 @@ from itr_identify.discrepancy.synthetic import synthetic_measurements
 from itr_identify.discrepancy.tables import build_tables
 from itr_identify.forward.model import PARAMETRISATIONS, ForwardModel, ForwardSettings
 from itr_identify.inference.formulations import fractions_of
-from itr_surrogate import paper_data
 
-SETTINGS = DiscrepancySettings(forward=ForwardSettings(box_um=12.0, voxel_um=0.5, replicas=2,
-                                                       seed=3))
+SETTINGS = DiscrepancySettings(forward=ForwardSettings(
+    RVESpec(box_um=12.0, voxel_um=0.5, seed=3), replicas=2))
 FORMS = ["Al2O3-45", "Al2O3-50", "Al2O3-55", "Al2O3-60", "AlN-50", "AlN-55", "AlN-60"]
 TRUE_R = {"R_Al2O3_silicone": 2.2e-8, "R_AlN_silicone": 3.0e-8}
 THICKNESS_MM = (0.5, 1.0, 1.5)

@@ -6,6 +6,7 @@ import math
 import numpy as np
 import pytest
 
+from itr_fv.rve_spec import RVESpec
 from itr_identify.discrepancy import effects as fx
 from itr_identify.discrepancy.effects import (
     AIR,
@@ -22,7 +23,7 @@ from itr_identify.forward.model import PARAMETRISATIONS, ForwardModel, ForwardSe
 from itr_identify.inference.formulations import fractions_of
 from itr_identify.inference.measurements import Measurements, read_measurements
 
-SMALL = ForwardSettings(box_um=12.0, voxel_um=0.5, replicas=2, seed=3)
+SMALL = ForwardSettings(RVESpec(box_um=12.0, voxel_um=0.5, seed=3), replicas=2)
 
 
 @pytest.fixture(scope="module")

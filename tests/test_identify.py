@@ -9,6 +9,7 @@ import math
 import numpy as np
 import pytest
 
+from itr_fv.rve_spec import RVESpec
 from itr_identify.forward.model import PARAMETRISATIONS, ForwardModel, ForwardSettings, full_solve
 from itr_identify.inference.calibrate import calibrate, stages_of
 from itr_identify.inference.formulations import fractions_of
@@ -17,7 +18,7 @@ from itr_identify.inference.pipeline import identify
 from itr_identify.inference.screen import paper_grid, screen
 from itr_identify.inference.validate import leave_one_out, validate
 
-SMALL = ForwardSettings(box_um=12.0, voxel_um=0.5, replicas=3, seed=3)
+SMALL = ForwardSettings(RVESpec(box_um=12.0, voxel_um=0.5, seed=3), replicas=3)
 TRUE_R = 3.0e-8
 # 50-60 vol%: they pack at once in a 12 um box (65 % needs redraws there)
 FORMS = ("Al2O3-50", "Al2O3-55", "Al2O3-60")
@@ -142,7 +143,7 @@ def test_area_parametrisation_reports_what_the_data_cannot_separate(table3):
     post = calibrate(ms, meas, grid_points=61)
     corr = post.correlation()
     assert corr[0, 1] < -0.3
-    st = post.stages[0]["identifiability"]
+    st = post.stages[0].identifiability
     assert len(st["directions"]) == 2
     ratios = sorted(d["posterior_to_prior_sd"] for d in st["directions"])
     assert ratios[0] < 0.2     # the contact resistance is pinned
@@ -193,7 +194,7 @@ def test_calibrate_rejects_bad_input(models, table3):
     with pytest.raises(ValueError, match="replicas"):
         ForwardSettings(replicas=1)
     with pytest.raises(ValueError, match="box_um/voxel_um"):
-        ForwardSettings(box_um=8.0, voxel_um=0.3)
+        ForwardSettings().with_(box_um=8.0, voxel_um=0.3)
     with pytest.raises(ValueError, match="parametrisation"):
         identify(table3, "spots")
 

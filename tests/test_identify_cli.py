@@ -53,7 +53,7 @@ def test_identify_bad_tables_fail_in_one_line(tmp_path, capsys, text, expected):
 
 @pytest.mark.parametrize("args, expected", [
     (["identify", "missing.csv"], "MEASUREMENTS"),
-    (["reproduce", "--voxel-um", "0.3", "--box-um", "8"], "--box-um/--voxel-um"),
+    (["reproduce", "--voxel-um", "0.3", "--box-um", "8"], "box_um/voxel_um: a 8 um box"),
     (["reproduce", "--replicas", "1"], "--replicas"),
     (["reproduce", "--parametrisation", "spots"], "--parametrisation"),
     (["reproduce", "--box-um", "-2"], "--box-um"),
@@ -106,6 +106,15 @@ def test_reproduce_end_to_end_at_tiny_size(tmp_path):
     assert set(solves["purpose"]) >= {"reduced basis", "RVE scatter", "validation"}
     # insulating corners of the reduced-basis box (R = 1e-5) fall below the matrix, 0.18
     assert np.all(np.array(solves["k_xx"]) > 0.05) and max(solves["k_xx"]) > 1.0
+    # one record format: full_solves.parquet lists rows of the solve store (OUT/solves),
+    # the same keys, tensors and iterations, with this run's labels
+    from itr_surrogate.engine import SolveStore
+    stored = {r["key"]: r for r in SolveStore(out / "solves").table().to_pylist()}
+    assert set(solves["key"]) <= set(stored)
+    assert "conductivities silicone 0.18, Al2O3 30, AlN 200 W/(m K)" in report
+    for i, key in enumerate(solves["key"]):
+        for col in ("rve_id", "k_xx", "k_yz", "k_iso", "iterations", "tol", "contact"):
+            assert solves[col][i] == stored[key][col], (key, col)
     names = {f["path"] for f in json.loads((out / "manifest.json").read_text())["files"]}
     assert {"fig2_psd.png", "fig4_rves.png", "fig6_parity.png", "fig8_screening.png",
             "report.md", "identified.json", "full_solves.parquet"} <= names

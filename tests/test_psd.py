@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from scipy import integrate
 
+from itr_fv.paper_data import TABLE1
 from itr_fv.psd import (
-    TABLE1,
     LogNormalPSD,
     fit_histogram,
     fit_sample,

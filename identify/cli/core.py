@@ -157,8 +157,10 @@ def forward_settings(fw, args: argparse.Namespace):
         return fw.with_(**changes)
     except ValueError as exc:
         msg = str(exc)
-        for name, flag in (("box_um/voxel_um", "--box-um/--voxel-um"), ("box_um", "--box-um"),
-                           ("voxel_um", "--voxel-um"), ("replicas", "--replicas")):
+        # (the box/voxel rule's message stays as itr_fv.rve_spec words it: the same line
+        # from every command and from campaign files)
+        for name, flag in (("box_um", "--box-um"), ("voxel_um", "--voxel-um"),
+                           ("replicas", "--replicas")):
             if msg.startswith(name + ":"):
                 msg = flag + msg[len(name):]
                 break

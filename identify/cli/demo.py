@@ -10,17 +10,13 @@ __all__ = ["add_parser"]
 
 
 def _run(args: argparse.Namespace) -> int:
+    from itr_fv.rve_spec import RVESpec
+
     from ..workflows.demo import DemoSettings, run_demo
 
     voxel = args.box_um / args.n if args.n is not None else args.voxel_um
-    n = args.box_um / voxel
-    if abs(n - round(n)) > 1e-6 * n:
-        raise CLIError(f"--voxel-um: the box ({args.box_um:g} um) is not a whole number of "
-                       f"{voxel:g} um voxels ({n:.3f}); choose --box-um or --voxel-um to fit", 2)
-    if round(n) > 512:
-        raise CLIError(f"--voxel-um: {int(round(n))}^3 voxels is beyond the demo's 512^3 limit", 2)
-    settings = DemoSettings(box_um=args.box_um, voxel_um=voxel, fraction=args.fraction,
-                            seed=args.seed, solver=args.solver, tol=args.tol)
+    settings = DemoSettings(rve=RVESpec(box_um=args.box_um, voxel_um=voxel, seed=args.seed),
+                            fraction=args.fraction, solver=args.solver, tol=args.tol)
     with output_folder(args.out) as out:
         try:
             run_demo(settings, out)

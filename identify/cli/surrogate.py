@@ -89,7 +89,7 @@ def _fit(args: argparse.Namespace) -> int:
         return 0
     from itr_fv.problem import DiscreteProblem
     from itr_surrogate.reduced_basis import ReducedBasis
-    from itr_surrogate.runner import build_rve
+    from itr_surrogate.runner import campaign_rve
 
     replicas = sorted(set(table.column("replica").to_pylist()))
     if args.replica not in replicas:
@@ -100,7 +100,7 @@ def _fit(args: argparse.Namespace) -> int:
         v = np.asarray(table.column(f).to_numpy(), dtype=np.float64)
         bounds[f] = (float(v.min()), float(v.max()))
     mid = {f: float(np.sqrt(lo * hi)) for f, (lo, hi) in bounds.items()}
-    ms = build_rve(camp, name, args.replica)
+    ms = campaign_rve(camp, name, args.replica).microstructure
     rb = ReducedBasis(DiscreteProblem(ms, contact=camp.contact), camp.materials(mid), bounds,
                       tol=args.tol, max_solves=args.max_solves, solver=camp.solver,
                       progress=not args.no_progress).fit()

@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from itr_fv import Materials, Microstructure
+from itr_fv.paper_data import PAPER_SYSTEM
 
 __all__ = ["Effect", "MatrixConductivity", "FillerConductivity", "Porosity",
            "FillerFraction", "ContactSpots", "TesterContact", "default_effects", "by_key",
@@ -105,13 +106,15 @@ class Effect:
 
 @dataclass(frozen=True)
 class MatrixConductivity(Effect):
-    """The matrix (silicone with its 4 vol% coupling agent) off the nominal 0.18 W/(m K)."""
+    """The matrix (silicone with its 4 vol% coupling agent) off its nominal conductivity
+    (the material system's: 0.18 W/(m K) for the paper's), from half to twice it."""
 
     key: str = "matrix"
     name: str = "matrix conductivity off nominal"
     parameter: str = "k_matrix_W_per_mK"
-    nominal: float = 0.18
-    values: tuple[float, ...] = (0.09, 0.135, 0.18, 0.27, 0.36)
+    nominal: float = PAPER_SYSTEM.matrix_conductivity
+    values: tuple[float, ...] = tuple(f * PAPER_SYSTEM.matrix_conductivity
+                                      for f in (0.5, 0.75, 1.0, 1.5, 2.0))
     signature: str = ("every formulation shifts the same way; the relative shift is largest "
                       "at the lowest filler fraction and the same for both fillers")
     separate_by: str = ("the conductivity of the neat matrix (silicone + coupling agent) "

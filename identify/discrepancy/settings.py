@@ -6,6 +6,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from itr_fv.rve_spec import RVESpec
+
 from ..forward.model import ForwardSettings
 
 __all__ = ["DiscrepancySettings"]
@@ -34,7 +36,7 @@ class DiscrepancySettings:
     """
 
     forward: ForwardSettings = field(default_factory=lambda: ForwardSettings(
-        box_um=12.0, voxel_um=0.5, replicas=3))
+        RVESpec(box_um=12.0, voxel_um=0.5), replicas=3))
     r_grid_m2K_per_W: tuple[float, ...] = tuple(float(x) for x in np.logspace(-9, -6, 7))
     r_scatter_m2K_per_W: float = 3e-8
     fine_points: int = 121

@@ -15,35 +15,73 @@ box of its parameters, and measures the RVE-to-RVE scatter by full solves of eve
 at the centre of the box. Its prediction is the first replica's reduced basis scaled by the
 ratio of the replica mean to the first replica at the centre
 (:attr:`ForwardModel.replica_factor`). Filler and matrix conductivities stay at the paper's values
-(``itr_surrogate.paper_data.PAPER_CONDUCTIVITY``), as in the paper's screening.
+(``itr_fv.paper_data.PAPER_CONDUCTIVITY``), as in the paper's screening.
 """
 
 from __future__ import annotations
 
 import math
+import threading
 import time
 import warnings
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 
-from itr_fv import Materials
+from itr_fv import Materials, paper_data
 from itr_fv.parameters import parameter_name
 from itr_fv.problem import DiscreteProblem
-from itr_fv.rve import FillerSpec, generate_rve
-from itr_surrogate import paper_data
-from itr_surrogate.engine import RVEData, SolveEngine, SolveRequest, cached_problem
+from itr_fv.rve import FillerSpec, build_rve
+from itr_fv.rve_spec import RVESpec
+from itr_surrogate.engine import (
+    RVEData,
+    SolveEngine,
+    SolveRequest,
+    SolveResult,
+    cached_problem,
+    solve_row,
+)
 from itr_surrogate.reduced_basis import ReducedBasis
 
 __all__ = ["Parametrisation", "PARAMETRISATIONS", "ForwardSettings", "ForwardModel",
            "full_solve", "MATRIX"]
 
-MATRIX = "silicone"
+#: The matrix of the paper's material system.
+MATRIX = paper_data.PAPER_SYSTEM.matrix
 #: The engine of models built without one: serial, in this process, no store.
 _SERIAL = SolveEngine()
-#: Packing draws per replica before a failure is raised.
-PACKING_ATTEMPTS = 12
+#: Held by the thread whose model does work in this process (see ForwardModel.build).
+_LOCAL_WORK = threading.Lock()
+_HOLDER = threading.local()
+
+
+@contextmanager
+def _local_work() -> Iterator[None]:
+    """Hold :data:`_LOCAL_WORK` (numba's default threading layer, the problem cache and
+    the progress bars take one caller at a time)."""
+    with _LOCAL_WORK:
+        _HOLDER.held = True
+        try:
+            yield
+        finally:
+            _HOLDER.held = False
+
+
+@contextmanager
+def _waiting_for_solves() -> Iterator[None]:
+    """Let other models' local work run while this thread waits for the engine."""
+    if not getattr(_HOLDER, "held", False):
+        yield
+        return
+    _HOLDER.held = False
+    _LOCAL_WORK.release()
+    try:
+        yield
+    finally:
+        _LOCAL_WORK.acquire()
+        _HOLDER.held = True
 
 
 @dataclass(frozen=True)
@@ -77,13 +115,12 @@ class ForwardSettings:
 
     Attributes
     ----------
-    box_um, voxel_um : float
-        RVE edge and voxel edge, um (the paper: 40 and 0.1).
+    rve : RVESpec
+        Box, voxel (the paper: 40 and 0.1 um), size cuts, matrix film and the packing seed
+        of the first replica (:class:`itr_fv.rve_spec.RVESpec`, checked there).
     replicas : int
-        RVE replicas per formulation (seeds ``seed + 0, 1, ...``); the reduced basis is
+        RVE replicas per formulation (seeds ``rve.seed + 0, 1, ...``); the reduced basis is
         fitted on the first, all enter the RVE scatter and the validation.
-    seed : int
-        Seed of the first replica's packing.
     prior_m2K_per_W : (float, float)
         Range of every resistance (log-uniform prior, reduced-basis box), m^2 K/W.
     rb_tol : float
@@ -92,29 +129,18 @@ class ForwardSettings:
         Full solves per reduced basis at most.
     solver_tol : float
         Relative residual of every full solve (itr_fft).
-    max_diameter_box_ratio : float
-        Largest particle diameter / box edge.
     """
 
-    box_um: float = 16.0
-    voxel_um: float = 0.25
+    rve: RVESpec = RVESpec(box_um=16.0, voxel_um=0.25)
     replicas: int = 3
-    seed: int = 1
     prior_m2K_per_W: tuple[float, float] = (1e-9, 1e-5)
     rb_tol: float = 2e-3
     rb_max_solves: int = 30
     solver_tol: float = 1e-8
-    max_diameter_box_ratio: float = 0.45
 
     def __post_init__(self) -> None:
-        for name in ("box_um", "voxel_um"):
-            v = getattr(self, name)
-            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
-                raise ValueError(f"{name}: expected a length > 0 in um, got {v!r}")
-        n = self.box_um / self.voxel_um
-        if abs(n - round(n)) > 1e-6 or round(n) < 8:
-            raise ValueError(f"box_um/voxel_um: the box must hold a whole number >= 8 of "
-                             f"voxels, got {n:g}")
+        if not isinstance(self.rve, RVESpec):
+            raise ValueError(f"rve: expected an RVESpec, got {type(self.rve).__name__}")
         if not isinstance(self.replicas, int) or self.replicas < 2:
             raise ValueError(f"replicas: expected a whole number >= 2 (the RVE scatter needs "
                              f"two), got {self.replicas!r}")
@@ -123,23 +149,33 @@ class ForwardSettings:
             raise ValueError(f"prior_m2K_per_W: expected 0 < lo < hi in m^2 K/W, got "
                              f"{self.prior_m2K_per_W!r}")
 
-    @property
-    def n(self) -> int:
-        return int(round(self.box_um / self.voxel_um))
+    # the RVE's fields, read through (the specification holds them)
+    box_um = property(lambda self: self.rve.box_um, doc="RVE edge, um.")
+    voxel_um = property(lambda self: self.rve.voxel_um, doc="Voxel edge, um.")
+    seed = property(lambda self: self.rve.seed, doc="Packing seed of the first replica.")
+    max_diameter_box_ratio = property(lambda self: self.rve.max_diameter_box_ratio,
+                                      doc="Largest particle diameter / box edge.")
+    n = property(lambda self: self.rve.n, doc="Voxels per box edge.")
 
     def to_dict(self) -> dict:
+        """Flat JSON-able form: the RVE's fields next to the others."""
         d = asdict(self)
+        del d["rve"]
         d["prior_m2K_per_W"] = list(self.prior_m2K_per_W)
-        return d
+        return {**self.rve.to_dict(), **d}
 
     def with_(self, **changes) -> "ForwardSettings":
+        """A copy with ``changes``; the RVE's fields (``box_um``, ``seed``, ...) go to
+        :attr:`rve` and are checked there."""
+        rve_names = set(RVESpec.field_names())
+        rve_changes = {k: changes.pop(k) for k in list(changes) if k in rve_names}
+        if rve_changes:
+            changes["rve"] = self.rve.with_(**rve_changes)
         return replace(self, **changes)
 
 
 def _specs(fractions: Mapping[str, float]) -> list[FillerSpec]:
-    psd = paper_data.psd_lognormal()
-    return [FillerSpec(f, mu=psd[f][0], sigma=psd[f][1], volume_fraction=v)
-            for f, v in fractions.items()]
+    return [FillerSpec.from_table1(f, v) for f, v in fractions.items()]
 
 
 def full_solve(ms, materials: Materials, tol: float, *, engine: SolveEngine | None = None,
@@ -174,7 +210,7 @@ class ForwardModel:
     replica_k: np.ndarray | None = None     # (replicas, 3) full solves at the centre
     anchor: dict[str, float] = field(default_factory=dict)
     anchor_k: np.ndarray | None = None      # (replicas, 3) full solves at ``anchor``
-    solves: list[dict] = field(default_factory=list)
+    solves: list[dict] = field(default_factory=list)   # the engine's rows (solve_row)
     seeds: list[int] = field(default_factory=list)
     fixed: dict[str, float] = field(default_factory=dict)
     carried_scatter: float = 0.0
@@ -189,7 +225,7 @@ class ForwardModel:
 
     def materials(self, values: Mapping[str, float]) -> Materials:
         """Paper conductivities plus ``values`` (flat names) under this contact model."""
-        k = {p: paper_data.PAPER_CONDUCTIVITY[p] for p in (MATRIX, *self.fractions)}
+        k = paper_data.PAPER_SYSTEM.conductivities(self.fractions)
         base = Materials(k, {(f, MATRIX): 1e-8 for f in self.fractions}, matrix=MATRIX,
                          contact=self.parametrisation.contact)
         params = {**self.fixed, **dict(values)}
@@ -201,30 +237,28 @@ class ForwardModel:
         return base.with_parameters(params)
 
     def pack(self, replica: int):
-        """The RVE of one replica: packing seed ``settings.seed + replica``; a packing that
-        does not reach the fraction (dense, small boxes) is redrawn with that seed plus
-        100, 200, ... (up to :data:`PACKING_ATTEMPTS` draws; the seed used is kept in
-        :attr:`seeds`)."""
-        s = self.settings
-        for attempt in range(PACKING_ATTEMPTS):
-            seed = s.seed + replica + 100 * attempt
-            try:
-                with warnings.catch_warnings():
-                    warnings.simplefilter("ignore", UserWarning)  # the box cut: in the report
-                    ms = generate_rve(_specs(self.fractions), box_um=s.box_um,
-                                      voxel_um=s.voxel_um, seed=seed, matrix=MATRIX,
-                                      max_diameter_box_ratio=s.max_diameter_box_ratio)
-            except RuntimeError:
-                if attempt == PACKING_ATTEMPTS - 1:
-                    raise
-                continue
-            self.seeds.append(seed)
-            return ms
+        """The RVE of one replica (:func:`itr_fv.rve.build_rve`: packing seed
+        ``settings.seed + replica``, redrawn with ``+ 100``, ``+ 200``, ... where a packing
+        fails; the seed used is kept in :attr:`seeds`). The box cut of the coarse tail is
+        in the report, not a warning."""
+        ms, seed = build_rve(self.settings.rve, _specs(self.fractions), replica,
+                             matrix=MATRIX, warn_box_cut=False)
+        self.seeds.append(seed)
+        return ms
 
     def build(self, *, bounds: Mapping[str, tuple[float, float]] | None = None,
               progress: bool = False) -> "ForwardModel":
         """Pack the replicas, fit the reduced basis over ``bounds`` (default: the prior box
-        of every parameter) and solve every replica at the box centre; returns self."""
+        of every parameter) and solve every replica at the box centre; returns self.
+
+        Models may be built from several threads at once (on a distributed engine): the
+        work done in this process (packing, the reduced basis's own algebra) runs one
+        model at a time, and only the waits for the engine's full solves overlap."""
+        with _local_work():
+            return self._build(bounds, progress)
+
+    def _build(self, bounds: Mapping[str, tuple[float, float]] | None,
+               progress: bool) -> "ForwardModel":
         t0 = time.perf_counter()
         s = self.settings
         if bounds is None:
@@ -241,11 +275,8 @@ class ForwardModel:
                 self.rb = ReducedBasis(problem, mat, bounds, tol=s.rb_tol,
                                        max_solves=s.rb_max_solves, solver_tol=s.solver_tol,
                                        seed=s.seed, progress=progress)
-                self.rb.fit(full_solve=lambda _problem, m: self._engine.solve_one(
-                    self._request(0, m, purpose="reduced basis", fields=True)))
-        for h in (self.rb.history_ if self.rb is not None else []):
-            self.solves.append({"purpose": "reduced basis", "replica": 0,
-                                **h["parameters"], "k_diagonal": h["k_diagonal"]})
+                self.rb.fit(full_solve=lambda _problem, m: self._solve_recorded(
+                    [self._request(0, m, purpose="reduced basis", fields=True)])[0])
         ks = self._solve_all(self.centre, purpose="RVE scatter")
         self.replica_k = ks
         self.build_seconds = time.perf_counter() - t0
@@ -351,20 +382,19 @@ class ForwardModel:
         mat = self.materials(values)
         requests = [self._request(r, mat, purpose=purpose)
                     for r in range(len(self.microstructures))]
-        results = self._engine.solve(requests, tick=tick)
-        out = []
-        for r, res in enumerate(results):
-            k = res.k_diagonal
-            out.append(k)
-            self.solves.append({"purpose": purpose, "replica": r, **values,
-                                "k_diagonal": k.tolist()})
-        return np.array(out)
+        results = self._solve_recorded(requests, tick=tick)
+        return np.array([res.k_diagonal for res in results])
+
+    def _solve_recorded(self, requests: list[SolveRequest], *,
+                        tick: Callable[[], None] | None = None) -> list[SolveResult]:
+        """``requests`` on the engine, each recorded in :attr:`solves` (the store's row)."""
+        with _waiting_for_solves():
+            results = self._engine.solve(requests, tick=tick)
+        self.solves.extend(solve_row(q, res) for q, res in zip(requests, results))
+        return results
 
     def solve_first(self, values: Mapping[str, float], *, purpose: str) -> np.ndarray:
         """Full solve (3,) of the first replica at ``values`` (with :attr:`fixed`), recorded
         in :attr:`solves`."""
-        k = self._engine.solve_one(self._request(0, self.materials(values),
-                                                 purpose=purpose)).k_diagonal
-        self.solves.append({"purpose": purpose, "replica": 0, **dict(values),
-                            "k_diagonal": k.tolist()})
-        return k
+        request = self._request(0, self.materials(values), purpose=purpose)
+        return self._solve_recorded([request])[0].k_diagonal

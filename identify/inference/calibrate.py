@@ -32,9 +32,11 @@ spread is more than half the prior's are combinations the data do not separate.
 
 from __future__ import annotations
 
+import copy
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 from scipy.special import gammaln
@@ -42,9 +44,8 @@ from scipy.special import gammaln
 from ..forward.model import ForwardModel
 from .measurements import Measurements
 
-__all__ = ["Stage", "Posterior", "stages_of", "calibrate", "pooled_scatter", "variance",
-           "log_likelihood",
-           "UNIDENTIFIED_RATIO"]
+__all__ = ["Stage", "StageResult", "Posterior", "stages_of", "calibrate", "pooled_scatter",
+           "variance", "log_likelihood", "UNIDENTIFIED_RATIO"]
 
 #: Depth (in log-likelihood) of the region that the second, refined grid covers.
 REFINE_DEPTH = 25.0
@@ -91,6 +92,66 @@ def pooled_scatter(models: Sequence[ForwardModel]) -> float:
     return float(math.sqrt(np.mean([m.rve_scatter ** 2 for m in models])))
 
 
+@dataclass(frozen=True, eq=False)
+class StageResult:
+    """What one stage of :func:`calibrate` found.
+
+    Attributes
+    ----------
+    system : tuple of str
+        The stage's filler system, e.g. ``("Al2O3",)`` or ``("Al2O3", "AlN")``.
+    formulations : tuple of str
+        The measured formulations of that system whose likelihood the stage evaluates.
+    parameters : tuple of str
+        Flat names of the parameters this stage identifies (values in m^2 K/W); empty
+        where the stage has nothing new to identify and only tests the earlier stages.
+    carried : tuple of str
+        Flat names of the parameters taken from the earlier stages' posterior.
+    rve_scatter : float
+        Relative RVE-to-RVE scatter of k_iso pooled over the formulations
+        (:func:`pooled_scatter`), dimensionless (a fraction of k_iso).
+    log_likelihood_best : float
+        The stage's log-likelihood (nats) at the best point: the earlier stages' best
+        values and this stage's grid point of highest likelihood.
+    identifiability : dict
+        ``system`` ("+"-joined filler names), ``directions`` (per principal direction of
+        the posterior covariance of log10 values: ``combination``, text;
+        ``posterior_to_prior_sd``, dimensionless; ``determined``, bool) and ``statement``,
+        text.
+    axes_log10 : tuple of ndarray or None
+        Per parameter, the refined grid's axis, log10 of m^2 K/W (``grid_points`` values
+        each); None where ``parameters`` is empty.
+    density : ndarray or None
+        Marginal posterior mass per grid point over ``axes_log10`` (one axis per
+        parameter, sums to 1), dimensionless; None where ``parameters`` is empty.
+    """
+
+    system: tuple[str, ...]
+    formulations: tuple[str, ...]
+    parameters: tuple[str, ...]
+    carried: tuple[str, ...]
+    rve_scatter: float
+    log_likelihood_best: float
+    identifiability: dict[str, Any]
+    axes_log10: tuple[np.ndarray, ...] | None = None
+    density: np.ndarray | None = None
+
+    def to_dict(self) -> dict:
+        """The JSON-ready form: lists of names and numbers, ``axes_log10`` and ``density``
+        only where the stage identifies parameters."""
+        out: dict[str, Any] = {"system": list(self.system),
+                               "formulations": list(self.formulations),
+                               "parameters": list(self.parameters),
+                               "carried": list(self.carried), "rve_scatter": self.rve_scatter}
+        if self.axes_log10 is not None:
+            out["axes_log10"] = [a.tolist() for a in self.axes_log10]
+        if self.density is not None:
+            out["density"] = self.density.tolist()
+        out["log_likelihood_best"] = self.log_likelihood_best
+        out["identifiability"] = copy.deepcopy(self.identifiability)
+        return out
+
+
 @dataclass
 class Posterior:
     """Calibrated parameters (flat names, m^2 K/W).
@@ -102,9 +163,9 @@ class Posterior:
         Posterior samples of log10 values.
     best : dict
         Highest-posterior values found on the grid.
-    stages : list of dict
+    stages : list of StageResult
         Per stage: system, formulations, parameters, grid, marginal density,
-        correlation, identifiability, log-likelihood at the best point.
+        identifiability, log-likelihood at the best point.
     prior : (float, float)
         The log-uniform prior's range, m^2 K/W.
     """
@@ -113,7 +174,7 @@ class Posterior:
     samples: np.ndarray
     best: dict[str, float]
     prior: tuple[float, float]
-    stages: list[dict] = field(default_factory=list)
+    stages: list[StageResult] = field(default_factory=list)
 
     def median(self, name: str) -> float:
         return float(10 ** np.median(self.samples[:, self.names.index(name)]))
@@ -147,7 +208,7 @@ class Posterior:
         return np.corrcoef(self.samples, rowvar=False)
 
     def log_likelihood_best(self) -> float:
-        return float(sum(s["log_likelihood_best"] for s in self.stages))
+        return float(sum(s.log_likelihood_best for s in self.stages))
 
     def to_dict(self) -> dict:
         params = {}
@@ -158,7 +219,7 @@ class Posterior:
         return {"parameters": params,
                 "correlation_log10": {"names": self.names,
                                       "matrix": np.round(self.correlation(), 4).tolist()},
-                "identifiability": [s["identifiability"] for s in self.stages],
+                "identifiability": [s.identifiability for s in self.stages],
                 "prior_m2K_per_W": list(self.prior),
                 "log_likelihood_best": self.log_likelihood_best()}
 
@@ -258,20 +319,20 @@ def calibrate(models: Mapping[str, ForwardModel], measurements: Measurements, *,
     names: list[str] = []
     samples = np.zeros((n_samples, 0))
     best: dict[str, float] = {}
-    stages_out = []
+    stages_out: list[StageResult] = []
     for stage in stages_of(models):
         scatter = pooled_scatter([models[f] for f in stage.formulations])
         if not stage.new:
             # nothing new to identify: these formulations only test the earlier stages
             at_best = {p: np.array([best[p]]) for p in names}
-            stages_out.append({
-                "system": list(stage.system), "formulations": list(stage.formulations),
-                "parameters": [], "carried": list(stage.carried), "rve_scatter": scatter,
-                "log_likelihood_best": float(_stage_loglike(models, stage, measurements,
-                                                            at_best, scatter)[0]),
-                "identifiability": {"system": "+".join(stage.system), "directions": [],
-                                    "statement": "no parameter of its own: predicted from "
-                                                 "the earlier stages"}})
+            stages_out.append(StageResult(
+                system=tuple(stage.system), formulations=tuple(stage.formulations),
+                parameters=(), carried=tuple(stage.carried), rve_scatter=scatter,
+                log_likelihood_best=float(_stage_loglike(models, stage, measurements,
+                                                         at_best, scatter)[0]),
+                identifiability={"system": "+".join(stage.system), "directions": [],
+                                 "statement": "no parameter of its own: predicted from "
+                                              "the earlier stages"}))
             continue
         if stage.carried:
             pick = rng.choice(samples.shape[0], size=min(carried_samples, samples.shape[0]),
@@ -324,13 +385,11 @@ def calibrate(models: Mapping[str, ForwardModel], measurements: Measurements, *,
             best[p] = float(10 ** G[bg, j])
         names += list(stage.new)
         marg = w.sum(axis=0).reshape(shape)
-        stages_out.append({
-            "system": list(stage.system), "formulations": list(stage.formulations),
-            "parameters": list(stage.new), "carried": list(stage.carried),
-            "rve_scatter": scatter, "axes_log10": [a.tolist() for a in axes],
-            "density": (marg / marg.sum()).tolist(),
-            "log_likelihood_best": float(ll_best[bg]),
-            "identifiability": {"system": "+".join(stage.system),
-                                **_identifiability(stage.new, new_samples, prior)},
-        })
+        stages_out.append(StageResult(
+            system=tuple(stage.system), formulations=tuple(stage.formulations),
+            parameters=tuple(stage.new), carried=tuple(stage.carried),
+            rve_scatter=scatter, log_likelihood_best=float(ll_best[bg]),
+            identifiability={"system": "+".join(stage.system),
+                             **_identifiability(stage.new, new_samples, prior)},
+            axes_log10=tuple(np.array(a) for a in axes), density=marg / marg.sum()))
     return Posterior(names, samples, best, tuple(prior), stages_out)

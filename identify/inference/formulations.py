@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import re
 
-from itr_surrogate import paper_data
+from itr_fv import paper_data
 
 __all__ = ["fractions_of"]
 

@@ -142,7 +142,7 @@ def _check_formulation(path: Path, line: int, name: str, known) -> None:
 
 
 def _known_formulations() -> set[str]:
-    from itr_surrogate import paper_data
+    from itr_fv import paper_data
 
     return set(paper_data.formulations())
 
@@ -180,7 +180,7 @@ def read_measurements(path: str | Path | None = None, *,
         non-positive thickness where the column exists.
     """
     if path is None:
-        from itr_surrogate import paper_data
+        from itr_fv import paper_data
 
         p, text = Path("measured_tc.csv"), paper_data.table_text("measured_tc")
     else:

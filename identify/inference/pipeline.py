@@ -20,6 +20,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Mapping
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -127,24 +128,27 @@ def identify(measurements: Measurements, parametrisation: str = "gap", *,
     multis = [f for f in comps if len(comps[f]) > 1]
     t0 = time.perf_counter()
     models: dict[str, ForwardModel] = {}
+    todo = {}
     for f in singles:
         old = (reuse or {}).get(f)
         if (old is not None and old.settings == settings and old.parametrisation == par
                 and not old.fixed):
             models[f] = old
         else:
-            models[f] = _build(f, comps[f], par, settings, None, progress, echo, engine)
+            todo[f] = {}
+    models.update(_build_all(todo, comps, par, settings, progress, echo, engine))
+    models = {f: models[f] for f in singles}
     seconds = {"single-filler models": time.perf_counter() - t0}
     t = time.perf_counter()
     post = _anchored(models, singles, measurements, grid_points, seed) if singles else None
     seconds["single-filler calibration and anchors"] = time.perf_counter() - t
     t = time.perf_counter()
     central = post.central() if post is not None else {}
+    fixed_of = {f: {p: central[p] for p in par.parameters(list(comps[f])) if p in central}
+                for f in multis}
+    models.update(_build_all(fixed_of, comps, par, settings, progress, echo, engine))
     for f in multis:
-        params = par.parameters(list(comps[f]))
-        fixed = {p: central[p] for p in params if p in central}
-        models[f] = _build(f, comps[f], par, settings, fixed, progress, echo, engine)
-        if fixed:
+        if fixed_of[f]:
             models[f].carried_scatter = _carried_scatter(models[f], post, seed)
     if any(models[f].rb is not None for f in multis):
         post = _anchored(models, multis, measurements, grid_points, seed)
@@ -184,13 +188,37 @@ def _carried_scatter(model: ForwardModel, posterior: Posterior, seed: int) -> fl
     return float(np.std(ks, ddof=1) / np.mean(ks))
 
 
-def _build(name: str, fractions: dict[str, float], par, settings: ForwardSettings,
-           fixed: dict[str, float] | None, progress: bool,
-           echo: Callable[[str], None], engine: SolveEngine | None) -> ForwardModel:
-    m = ForwardModel(name, fractions, par, settings, fixed=dict(fixed or {}), engine=engine)
-    m.build(progress=progress)
+def _build_all(fixed_of: Mapping[str, dict[str, float]], comps: Mapping[str, dict[str, float]],
+               par, settings: ForwardSettings, progress: bool, echo: Callable[[str], None],
+               engine: SolveEngine | None) -> dict[str, ForwardModel]:
+    """Build the models of the formulations ``fixed_of`` (name -> parameters held fixed).
+
+    On a distributed engine the formulations are independent and are built from one thread
+    each, so that their full solves share the workers (each model's own steps stay in
+    order; :meth:`ForwardModel.build` runs the local work one model at a time); otherwise
+    one after another. The lines on ``echo`` come in formulation order either way."""
+    def build(f: str) -> ForwardModel:
+        m = ForwardModel(f, comps[f], par, settings, fixed=dict(fixed_of[f]), engine=engine)
+        return m.build(progress=progress)
+
+    names = list(fixed_of)
+    if engine is not None and engine.distributed and len(names) > 1:
+        with ThreadPoolExecutor(max_workers=len(names)) as pool:
+            built = dict(zip(names, pool.map(build, names)))
+        for f in names:
+            echo(_describe(built[f]))
+        return built
+    built = {}
+    for f in names:
+        built[f] = build(f)
+        echo(_describe(built[f]))
+    return built
+
+
+def _describe(m: ForwardModel) -> str:
+    """One line on a built model: particles, reduced basis, RVE scatter, seconds."""
     rb = (f"reduced basis {m.rb.n_solves_} full solves (gap {m.rb.training_gap_:.1e})"
           if m.rb is not None else "no parameter of its own")
-    echo(f"  {par.name}: {name}: {m.microstructures[0].n_particles} particles, {rb}, RVE "
-         f"scatter {100 * m.rve_scatter:.1f} %, {m.build_seconds:.0f} s")
-    return m
+    return (f"  {m.parametrisation.name}: {m.formulation}: "
+            f"{m.microstructures[0].n_particles} particles, {rb}, RVE scatter "
+            f"{100 * m.rve_scatter:.1f} %, {m.build_seconds:.0f} s")

@@ -11,9 +11,9 @@ from pathlib import Path
 
 import numpy as np
 
+from itr_fv import paper_data
 from itr_fv.io import atomic_path
 from itr_fv.psd import LogNormalPSD, fit_truncated_sample
-from itr_surrogate import paper_data
 
 from ..inference.pipeline import Identification
 
@@ -157,20 +157,20 @@ def posterior_figure(ident: Identification, path: Path) -> Path:
     """Marginal posterior densities of each calibration stage (2-D maps show which
     combinations the data determine)."""
     plt = _pyplot()
-    stages = [s for s in ident.posterior.stages if s["parameters"]]
+    stages = [s for s in ident.posterior.stages if s.parameters]
     fig, axes = plt.subplots(1, len(stages), figsize=(4.5 * len(stages), 4), squeeze=False)
     for ax, st in zip(axes[0], stages):
-        axes_ = [np.array(a) for a in st["axes_log10"]]
-        dens = np.array(st["density"])
+        axes_ = [np.asarray(a) for a in st.axes_log10]
+        dens = np.asarray(st.density)
         if dens.ndim == 2:
             ax.pcolormesh(axes_[0], axes_[1], dens.T, shading="auto", cmap="viridis")
-            ax.set_xlabel(f"log10 {st['parameters'][0]}")
-            ax.set_ylabel(f"log10 {st['parameters'][1]}")
+            ax.set_xlabel(f"log10 {st.parameters[0]}")
+            ax.set_ylabel(f"log10 {st.parameters[1]}")
         else:
             ax.plot(axes_[0], dens)
-            ax.set_xlabel(f"log10 {st['parameters'][0]}")
+            ax.set_xlabel(f"log10 {st.parameters[0]}")
             ax.set_ylabel("posterior mass per grid point")
-        ax.set_title(f"{ident.parametrisation}: {'+'.join(st['system'])}")
+        ax.set_title(f"{ident.parametrisation}: {'+'.join(st.system)}")
     fig.tight_layout()
     return _save(fig, path)
 

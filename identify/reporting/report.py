@@ -7,8 +7,8 @@ from collections.abc import Mapping
 
 import numpy as np
 
+from itr_fv import paper_data
 from itr_fv.parameters import parse_parameter
-from itr_surrogate import paper_data
 
 from ..inference.measurements import Measurements
 from ..inference.pipeline import Identification
@@ -163,7 +163,7 @@ def identifiability_lines(idents: Mapping[str, Identification]) -> list[str]:
                              f"end ({prior[0]:g} - {prior[1]:g} m^2 K/W): the data bound it "
                              "from one side only.")
         for st in ident.posterior.stages:
-            ia = st["identifiability"]
+            ia = st.identifiability
             lines.append(f"- **{par}, {ia['system']}**: {ia['statement']}.")
             for d in ia["directions"]:
                 lines.append(f"  - {d['combination']}: posterior/prior spread "
@@ -205,6 +205,14 @@ def box_cut(settings) -> dict[str, float]:
             for f, (mu, sigma) in paper_data.psd_lognormal().items()}
 
 
+def conductivities_used(ident: Identification) -> str:
+    """The phase conductivities the forward models solved with, as one phrase."""
+    used: dict[str, float] = {}
+    for m in ident.models.values():
+        used.update(m.materials(m.centre).conductivity)
+    return ", ".join(f"{p} {k:g}" for p, k in used.items()) + " W/(m K)"
+
+
 def settings_lines(idents: Mapping[str, Identification], extra: Mapping[str, object]
                    ) -> list[str]:
     ident = next(iter(idents.values()))
@@ -217,7 +225,7 @@ def settings_lines(idents: Mapping[str, Identification], extra: Mapping[str, obj
              f"({s.max_diameter_box_ratio * s.box_um:.1f} um): the cut removes "
              + ", ".join(f"{100 * v:.0f} % of the {f} volume" for f, v in box_cut(s).items())
              + " of Table 1's distributions (replaced by smaller particles); conductivities "
-             "silicone 0.18, Al2O3 30, AlN 200 W/(m K)",
+             + conductivities_used(ident),
              f"- prior: log-uniform {s.prior_m2K_per_W[0]:g} - {s.prior_m2K_per_W[1]:g} "
              "m^2 K/W for every resistance; screening grid 1e-8 - 1e-5 (the paper's)",
              f"- reduced basis: relative bound gap {s.rb_tol:g}, at most {s.rb_max_solves} "

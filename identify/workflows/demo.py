@@ -25,13 +25,16 @@ from pathlib import Path
 
 import numpy as np
 
-from itr_surrogate import paper_data
+from itr_fv import paper_data
+from itr_fv.rve_spec import RVESpec
+from itr_surrogate.solver_choice import check_solver
 
-__all__ = ["DemoSettings", "run_demo", "PAPER_K", "PAPER_R", "VOXEL_BIAS", "DEMO_SCATTER"]
+__all__ = ["DemoSettings", "run_demo", "PAPER_R", "VOXEL_BIAS", "DEMO_SCATTER"]
 
 # The paper's identified resistances (Table 5), m^2 K/W, and its conductivities, W/(m K).
-PAPER_K = paper_data.PAPER_CONDUCTIVITY
 PAPER_R = paper_data.paper_resistances()
+#: The demo's largest grid, voxels per edge.
+MAX_DEMO_VOXELS = 512
 
 #: Measured discretisation bias of k_iso against the Richardson-extrapolated value, per
 #: voxel (um): (smallest, largest) over two packings, %, dense 60 % Al2O3 under the gap model
@@ -50,18 +53,41 @@ DEMO_SCATTER = {"seeds": 4, "std_percent": 0.5, "range_percent": 1.2,
 
 @dataclass(frozen=True)
 class DemoSettings:
-    """Settings of one demo run (lengths in micrometres)."""
+    """Settings of one demo run.
 
-    box_um: float = 16.0
-    voxel_um: float = 0.16
+    Attributes
+    ----------
+    rve : RVESpec
+        Box (default 16 um), voxel (0.16 um), packing seed (1), checked there.
+    fraction : float
+        Al2O3 volume fraction.
+    solver : str
+        ``"fft"`` or ``"fv"`` (or any choice of :mod:`itr_surrogate.solver_choice`).
+    tol : float
+        Relative residual of the solve.
+    """
+
+    rve: RVESpec = RVESpec(box_um=16.0, voxel_um=0.16)
     fraction: float = 0.55
-    seed: int = 1
     solver: str = "fft"
     tol: float = 1e-8
 
-    @property
-    def n(self) -> int:
-        return int(round(self.box_um / self.voxel_um))
+    def __post_init__(self) -> None:
+        if self.rve.n > MAX_DEMO_VOXELS:
+            raise ValueError(f"box_um/voxel_um: {self.rve.n}^3 voxels is beyond the demo's "
+                             f"{MAX_DEMO_VOXELS}^3 limit")
+        check_solver(self.solver)
+
+    box_um = property(lambda self: self.rve.box_um, doc="RVE edge, um.")
+    voxel_um = property(lambda self: self.rve.voxel_um, doc="Voxel edge, um.")
+    seed = property(lambda self: self.rve.seed, doc="Packing seed.")
+    n = property(lambda self: self.rve.n, doc="Voxels per box edge.")
+
+    def to_dict(self) -> dict:
+        """Flat JSON-able form: the RVE's fields next to the others."""
+        d = asdict(self)
+        del d["rve"]
+        return {**self.rve.to_dict(), **d}
 
 
 def bias_note(voxel_um: float) -> str:
@@ -105,29 +131,27 @@ def run_demo(settings: DemoSettings, out: Path, echo=print) -> list[Path]:
 
     ``out`` must exist and be writable; earlier demo files in it are replaced.
     """
-    from itr_fv import Materials, homogenize
+    from itr_fv import Materials
     from itr_fv.io import begin_run, write_manifest, write_text
-    from itr_fv.rve import FillerSpec, generate_rve
+    from itr_fv.rve import FillerSpec, build_rve
+    from itr_fv.solve import homogenize
+    from itr_surrogate.solver_choice import solver_backend
 
     begin_run(out)
     t0 = time.perf_counter()
-    ms = generate_rve([FillerSpec("Al2O3", mu=1.02, sigma=0.35,
-                                  volume_fraction=settings.fraction)],
-                      box_um=settings.box_um, voxel_um=settings.voxel_um, seed=settings.seed,
-                      matrix="silicone", max_diameter_box_ratio=0.45)
+    matrix = paper_data.PAPER_SYSTEM.matrix
+    ms, _ = build_rve(settings.rve, [FillerSpec.from_table1("Al2O3", settings.fraction)], 0,
+                      matrix=matrix)
     echo(f"RVE: {settings.n}^3 voxels of {settings.voxel_um:g} um ({settings.box_um:g} um box), "
          f"{ms.n_particles} Al2O3 particles, {ms.volume_fractions()['Al2O3']:.3f} by volume, "
          f"seed {settings.seed} ({time.perf_counter() - t0:.1f} s)")
     # the gap contact model: a contact is the two particle-matrix resistances and the
     # silicone film between the spheres, so only the particle-matrix value is needed
-    mat = Materials(PAPER_K, {("Al2O3", "silicone"): PAPER_R[("Al2O3", "silicone")]},
-                    matrix="silicone", contact="gap")
-    if settings.solver == "fft":
-        import itr_fft
-        solve = itr_fft.homogenize
-    else:
-        solve = homogenize
-    res = solve(ms, mat, tol=settings.tol)
+    mat = Materials(paper_data.PAPER_SYSTEM.conductivities(["Al2O3"]),
+                    {("Al2O3", matrix): PAPER_R[("Al2O3", matrix)]}, matrix=matrix,
+                    contact="gap")
+    res = homogenize(ms, mat, backend=solver_backend(settings.solver, ms.shape),
+                     tol=settings.tol)
     echo(res.summary())
     k_iso = float(np.trace(res.k_eff) / 3.0)
     echo(f"k_iso = {k_iso:.4f} W/(m K), solver {res.solver}")
@@ -138,12 +162,12 @@ def run_demo(settings: DemoSettings, out: Path, echo=print) -> list[Path]:
     summary = {"k_eff_W_per_mK": res.k_eff.tolist(), "k_iso_W_per_mK": k_iso,
                "iterations": res.iterations, "volume_fractions": ms.volume_fractions(),
                "solver": res.solver, "contact_model": res.info.get("contact"),
-               "settings": asdict(settings),
+               "settings": settings.to_dict(),
                "discretisation_note": bias_note(settings.voxel_um),
                "scatter_note": scatter_note(settings),
                "rve_scatter_percent": DEMO_SCATTER}
     js = write_text(out / "demo.json", json.dumps(summary, indent=2) + "\n")
     files = [vti, png, js]
-    manifest = write_manifest(out, files, {"job": "demo", **asdict(settings)})
+    manifest = write_manifest(out, files, {"job": "demo", **settings.to_dict()})
     echo(f"wrote {vti}, {png}, {js}, {manifest}")
     return files + [manifest]

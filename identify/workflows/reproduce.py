@@ -21,6 +21,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 from itr_fv.io import atomic_path, begin_run, write_manifest, write_text
+from itr_fv.rve_spec import RVESpec
 from itr_surrogate.engine import SolveEngine
 
 from ..forward.model import ForwardSettings
@@ -36,8 +37,8 @@ __all__ = ["ReproduceSettings", "run_reproduce", "run_identify", "write_solves"]
 class ReproduceSettings:
     """Settings of ``itr reproduce``; :meth:`full` gives the paper's RVE (40 um, 0.1 um)."""
 
-    forward: ForwardSettings = field(default_factory=lambda: ForwardSettings(box_um=12.0,
-                                                                             voxel_um=0.25))
+    forward: ForwardSettings = field(default_factory=lambda: ForwardSettings(
+        RVESpec(box_um=12.0, voxel_um=0.25)))
     parametrisations: tuple[str, ...] = ("area", "gap")
     grid_points: int = 121
     seed: int = 0
@@ -45,7 +46,7 @@ class ReproduceSettings:
 
     @classmethod
     def full(cls) -> "ReproduceSettings":
-        return cls(forward=ForwardSettings(box_um=40.0, voxel_um=0.1))
+        return cls(forward=ForwardSettings(RVESpec(box_um=40.0, voxel_um=0.1)))
 
     def to_dict(self) -> dict:
         d = asdict(self)
@@ -60,21 +61,14 @@ def _bar(total: int, desc: str, progress: bool):
 
 
 def write_solves(idents: Sequence[Identification], path: Path) -> Path:
-    """Every full solve of the run as one Parquet table (atomic)."""
+    """Every full solve of the run as one Parquet table (atomic): the solve store's rows
+    (:func:`itr_surrogate.engine.solve_row`: key, RVE, parameters, tensor, iterations,
+    labels) with the parametrisation that asked for them."""
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    rows = []
-    for ident in idents:
-        for f, m in ident.models.items():
-            for s in m.solves:
-                row = {"parametrisation": ident.parametrisation, "formulation": f,
-                       "purpose": s["purpose"], "replica": int(s["replica"]),
-                       "k_xx": s["k_diagonal"][0], "k_yy": s["k_diagonal"][1],
-                       "k_zz": s["k_diagonal"][2]}
-                row.update({k: float(v) for k, v in s.items()
-                            if k not in ("purpose", "replica", "k_diagonal")})
-                rows.append(row)
+    rows = [{"parametrisation": ident.parametrisation, **row}
+            for ident in idents for m in ident.models.values() for row in m.solves]
     names = sorted({k for r in rows for k in r})
     table = pa.table({k: [r.get(k) for r in rows] for k in names})
     with atomic_path(path) as tmp:
@@ -83,15 +77,19 @@ def write_solves(idents: Sequence[Identification], path: Path) -> Path:
 
 
 def _temperature_field(ident: Identification, formulation: str, out: Path) -> list[Path]:
-    """Full solve with fields of the first replica at the best values: .vti and a render."""
-    import itr_fft
+    """Full solve with fields of the first replica at the best values: .vti and a render
+    (on this process's cached problem of that RVE: its geometry is not built again)."""
+    from itr_fv.solve import homogenize
+    from itr_surrogate.engine import RVEData, cached_problem
+    from itr_surrogate.solver_choice import solver_backend
 
     m = ident.models[formulation]
     mat = m.materials({p: ident.posterior.best[p] for p in m.parameters})
+    problem = cached_problem(RVEData.of(m.microstructures[0]), mat.contact)[0]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        res = itr_fft.homogenize(m.microstructures[0], mat, tol=ident.settings.solver_tol,
-                                 directions=(0,))
+        res = homogenize(problem, mat, backend=solver_backend("fft", problem.shape),
+                         tol=ident.settings.solver_tol, directions=(0,))
     stem = f"temperature_{formulation}_{ident.parametrisation}"
     vti = res.to_vtk(out / f"{stem}.vti", load_cases=[0], vectors=False)
     flux = res.render_png(out / f"flux_{formulation}_{ident.parametrisation}.png")
@@ -195,7 +193,7 @@ def _figures(idents: dict[str, Identification], validation: dict, out: Path
 
 
 def _reproduce_markdown(idents, meas, validation, lofo, psd_fits, timing, settings) -> str:
-    from itr_surrogate import paper_data
+    from itr_fv import paper_data
 
     table1 = paper_data.psd_lognormal()
     lines = ["# The paper's pipeline, reproduced (`itr reproduce`)", "",

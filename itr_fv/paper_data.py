@@ -1,8 +1,13 @@
-"""The reference paper's tables, shipped with the package (``surrogate/data/*.csv``).
+"""The reference paper's tables and material system, shipped with the package
+(``itr_fv/data/*.csv``): the one place they are read.
 
-The tables are transcribed from the paper (Tables 1-6); ``data/README.md`` lists the
-paper's own inconsistencies. Readers return plain Python structures; units are in the
-column names (W/(m K), m^2 K/W, volume per cent, micrometres).
+The tables are transcribed from the paper (Tables 1-6, and the conductivities of its
+Sections 2.4 and 3.2 in ``conductivities.csv``); ``data/README.md`` lists the paper's own
+inconsistencies. Readers return plain Python structures; units are in the column names
+(W/(m K), m^2 K/W, volume per cent, micrometres). :data:`PAPER_SYSTEM` is the paper's
+material system (matrix, fillers, Table 1 size distributions, conductivities) as one
+:class:`~itr_fv.material_system.MaterialSystem`; :data:`TABLE1` and
+:data:`PAPER_CONDUCTIVITY` are views of it.
 """
 
 from __future__ import annotations
@@ -10,19 +15,23 @@ from __future__ import annotations
 import csv
 from importlib import resources
 
+from .material_system import Filler, MaterialSystem
+from .parameters import parameter_name
+from .psd import LogNormalPSD
+
 __all__ = ["read_table", "table_text", "formulations", "psd_lognormal", "paper_resistances",
-           "PAPER_CONDUCTIVITY", "paper_parameters",
+           "PAPER_SYSTEM", "PAPER_CONDUCTIVITY", "TABLE1", "paper_parameters",
            "paper_validation"]
 
 TABLES = ("formulations", "measured_tc", "paper_itr", "paper_validation", "parameter_grid",
-          "psd_lognormal")
+          "psd_lognormal", "conductivities")
 
 
 def table_text(name: str) -> str:
     """The CSV text of the shipped table ``name`` (one of :data:`TABLES`)."""
     if name not in TABLES:
         raise ValueError(f"name: expected one of {TABLES}, got {name!r}")
-    return resources.files("itr_surrogate").joinpath("data", f"{name}.csv").read_text()
+    return resources.files("itr_fv").joinpath("data", f"{name}.csv").read_text()
 
 
 def read_table(name: str) -> list[dict[str, str]]:
@@ -46,16 +55,29 @@ def psd_lognormal() -> dict[str, tuple[float, float]]:
             for r in read_table("psd_lognormal")}
 
 
-#: The conductivities the paper simulates with, W/(m K) (Sections 2.4 and 3.2: silicone
-#: 0.18, Al2O3 30, AlN 200; the hybrids are simulated at these fixed values).
-PAPER_CONDUCTIVITY = {"silicone": 0.18, "Al2O3": 30.0, "AlN": 200.0}
+def _paper_system() -> MaterialSystem:
+    psd = psd_lognormal()
+    rows = read_table("conductivities")
+    (matrix,) = [r for r in rows if r["role"] == "matrix"]
+    fillers = tuple(Filler(r["material"], float(r["k_W_per_mK"]),
+                           LogNormalPSD(*psd[r["material"]], "number"))
+                    for r in rows if r["role"] == "filler")
+    return MaterialSystem(matrix["material"], float(matrix["k_W_per_mK"]), fillers)
+
+
+#: The paper's material system: silicone 0.18 W/(m K) with Al2O3 (30) and AlN (200) of the
+#: Table 1 size distributions (the hybrids are simulated at these fixed values).
+PAPER_SYSTEM = _paper_system()
+#: The conductivities the paper simulates with, W/(m K) (a view of :data:`PAPER_SYSTEM`).
+PAPER_CONDUCTIVITY = PAPER_SYSTEM.conductivities()
+#: Table 1 of the paper: filler -> number-weighted lognormal of ln(D / 1 um) (a view of
+#: :data:`PAPER_SYSTEM`).
+TABLE1: dict[str, LogNormalPSD] = PAPER_SYSTEM.size_distributions()
 
 
 def paper_parameters(matrix: str = "silicone") -> dict[str, float]:
     """The paper's values under the flat names: ``k_<phase>`` of :data:`PAPER_CONDUCTIVITY`
     and the filler-matrix resistances ``R_<filler>_<matrix>`` of Table 5."""
-    from itr_fv.parameters import parameter_name
-
     out = {parameter_name("k", p): v for p, v in PAPER_CONDUCTIVITY.items()}
     out.update({parameter_name("R", a, b): v for (a, b), v in paper_resistances().items()
                 if matrix in (a, b)})

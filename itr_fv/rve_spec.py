@@ -1,0 +1,153 @@
+"""The one RVE specification: box, voxel, size cuts, matrix film and packing seeds.
+
+Every RVE the package packs is described by an :class:`RVESpec` and built by
+:func:`itr_fv.rve.build_rve` (``build_rve(spec, fillers, replica)``). Campaign files, the
+identification, the discrepancy workflow and the demo compose it (their own settings stay
+theirs), so a box and voxel are checked by one rule with one message
+(:func:`voxels_per_edge`), here and nowhere else.
+
+The rule: the box edge holds a whole number of voxel edges, to 1e-6 relative, and at least
+:data:`MIN_VOXELS_PER_EDGE` of them (fewer cannot resolve a sphere, and the FFT and AMG
+solvers' grids assume it).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, fields, replace
+from typing import Any
+
+__all__ = ["RVESpec", "voxels_per_edge", "MIN_VOXELS_PER_EDGE", "MAX_DIAMETER_BOX_RATIO",
+           "PACKING_ATTEMPTS", "SEED_STRIDE"]
+
+#: Fewest voxels along the box edge.
+MIN_VOXELS_PER_EDGE = 8
+#: Largest particle diameter / box edge unless a caller says otherwise: 0.45 keeps a sphere
+#: clear of its own periodic image and cuts less of the coarse tail than 1/3 (the box-size
+#: study, ``validation/results/box_size.md``).
+MAX_DIAMETER_BOX_RATIO = 0.45
+#: Packings tried per replica before :func:`itr_fv.rve.build_rve` gives up.
+PACKING_ATTEMPTS = 12
+#: Seed step between the attempts of one replica (replica ``r``, attempt ``a``: seed
+#: ``spec.seed + r + SEED_STRIDE * a``), larger than any replica count in use so that the
+#: attempts of one replica never take another replica's seed.
+SEED_STRIDE = 100
+
+
+def _is_number(value: Any) -> bool:
+    return (not isinstance(value, bool) and isinstance(value, (int, float))
+            and math.isfinite(value))
+
+
+def voxels_per_edge(box_um: Any, voxel_um: Any) -> int:
+    """Voxels along the box edge, by the package's one rule.
+
+    Parameters
+    ----------
+    box_um, voxel_um : float
+        Box edge and voxel edge, um.
+
+    Returns
+    -------
+    int
+        ``box_um / voxel_um``, a whole number >= :data:`MIN_VOXELS_PER_EDGE`.
+
+    Raises
+    ------
+    ValueError
+        A length that is not a finite number > 0 (named), or a box that does not hold a
+        whole number >= 8 of voxels (``box_um/voxel_um: ...``; the same message wherever an
+        RVE is specified).
+    """
+    for name, value in (("box_um", box_um), ("voxel_um", voxel_um)):
+        if not _is_number(value) or value <= 0:
+            raise ValueError(f"{name}: expected a length > 0 in um, got {value!r}")
+    n = box_um / voxel_um
+    if abs(n - round(n)) > 1e-6 * n or round(n) < MIN_VOXELS_PER_EDGE:
+        raise ValueError(f"box_um/voxel_um: a {box_um:g} um box holds {n:.6g} voxels of "
+                         f"{voxel_um:g} um; it must hold a whole number >= "
+                         f"{MIN_VOXELS_PER_EDGE} of them")
+    return int(round(n))
+
+
+@dataclass(frozen=True)
+class RVESpec:
+    """What an RVE is, apart from its fillers: checked on construction.
+
+    Attributes
+    ----------
+    box_um : float
+        Edge of the periodic cube, um (the paper: 40).
+    voxel_um : float
+        Voxel edge, um (the paper: 0.1); ``box_um / voxel_um`` a whole number >= 8.
+    max_diameter_box_ratio : float
+        Largest particle diameter / box edge, in (0, 0.5).
+    min_gap_um : float
+        Thinnest matrix film between two particles, um (>= 0; 0 keeps the packer's
+        numerical gaps of about 1 nm). Under the gap contact model it is the film of every
+        contact.
+    tail_quantile : float
+        Number-probability cut of each far tail of the size distribution, in (0, 0.05).
+    seed : int
+        Packing seed of replica 0; replica ``r`` packs with ``seed + r`` (and, if that
+        packing fails, ``seed + r + 100``, ``+ 200``, ...).
+    """
+
+    box_um: float
+    voxel_um: float
+    max_diameter_box_ratio: float = MAX_DIAMETER_BOX_RATIO
+    min_gap_um: float = 0.0
+    tail_quantile: float = 1e-4
+    seed: int = 1
+
+    def __post_init__(self) -> None:
+        voxels_per_edge(self.box_um, self.voxel_um)
+        r = self.max_diameter_box_ratio
+        if not _is_number(r) or not 0 < r < 0.5:
+            raise ValueError(f"max_diameter_box_ratio: expected a value in (0, 0.5), got {r!r}")
+        if not _is_number(self.min_gap_um) or self.min_gap_um < 0:
+            raise ValueError(f"min_gap_um: expected a film >= 0 um, got {self.min_gap_um!r}")
+        q = self.tail_quantile
+        if not _is_number(q) or not 0 < q < 0.05:
+            raise ValueError(f"tail_quantile: expected a value in (0, 0.05), got {q!r}")
+        if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
+            raise ValueError(f"seed: expected a whole number >= 0, got {self.seed!r}")
+
+    @property
+    def n(self) -> int:
+        """Voxels per box edge."""
+        return voxels_per_edge(self.box_um, self.voxel_um)
+
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        """Grid shape ``(n, n, n)``."""
+        return (self.n,) * 3
+
+    def seeds(self, replica: int) -> list[int]:
+        """Packing seeds tried for ``replica``, in order (:data:`PACKING_ATTEMPTS`)."""
+        if isinstance(replica, bool) or not isinstance(replica, int) or replica < 0:
+            raise ValueError(f"replica: expected a whole number >= 0, got {replica!r}")
+        return [self.seed + replica + SEED_STRIDE * a for a in range(PACKING_ATTEMPTS)]
+
+    def with_(self, **changes: Any) -> "RVESpec":
+        """A copy with ``changes`` (checked again)."""
+        return replace(self, **changes)
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain JSON-able form; ``RVESpec.from_dict(spec.to_dict()) == spec``."""
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> "RVESpec":
+        """The spec of :meth:`to_dict`'s form (unknown keys: ValueError naming the key)."""
+        known = {f.name for f in fields(cls)}
+        unknown = sorted(set(data) - known)
+        if unknown:
+            raise ValueError(f"{unknown[0]}: not a key of an RVE specification "
+                             f"(known: {sorted(known)})")
+        return cls(**data)
+
+    @classmethod
+    def field_names(cls) -> tuple[str, ...]:
+        """The names of the specification's fields."""
+        return tuple(f.name for f in fields(cls))
