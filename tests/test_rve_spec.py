@@ -116,3 +116,30 @@ def test_the_paper_material_system_is_read_once_by_every_user():
     assert system.describe() == "silicone 0.18, Al2O3 30, AlN 200 W/(m K)"
     with pytest.raises(ValueError, match="filler: 'ZnO'"):
         system.filler("ZnO")
+
+
+def test_film_and_psd_basis_are_stated_inputs_of_the_identification():
+    from itr_identify.cli.core import reproduce_settings
+    from itr_identify.cli.dispatch import build_parser
+    from itr_identify.forward.model import PARAMETRISATIONS, ForwardModel, ForwardSettings
+
+    args = build_parser().parse_args(["reproduce", "--film-nm", "2", "--psd-basis", "volume"])
+    fw = reproduce_settings(args).forward
+    assert fw.rve.min_gap_um == pytest.approx(0.002) and fw.psd_basis == "volume"
+    assert fw.to_dict()["min_gap_um"] == pytest.approx(0.002)
+    assert fw.to_dict()["psd_basis"] == "volume"
+    with pytest.raises(ValueError, match="psd_basis"):
+        ForwardSettings(psd_basis="mass")
+    # read as volume-weighted, Table 1's AlN is a powder of smaller particles (number median
+    # smaller by exp(3 sigma^2) = 2.84): more of them in the same box, and the film holds
+    # (0.2 um voxels: at 0.25 um the volume reading's smallest AlN are not resolved)
+    small = ForwardSettings(RVESpec(12.0, 0.2, min_gap_um=0.002), replicas=2)
+    models = {basis: ForwardModel("AlN-50", {"AlN": 0.5}, PARAMETRISATIONS["gap"],
+                                  small.with_(psd_basis=basis)) for basis in ("number", "volume")}
+    packed = {basis: m.pack(0) for basis, m in models.items()}
+    n = {basis: ms.n_particles for basis, ms in packed.items()}
+    assert n["volume"] > 5 * n["number"]
+    from itr_fv.packing import pairs_within_gap
+    t = packed["number"].particles
+    _, _, gaps = pairs_within_gap(t.centers_m * 1e6, t.radii_m * 1e6, 12.0, 0.01)
+    assert gaps.size and gaps.min() >= 0.002 - 1e-9

@@ -1,94 +1,151 @@
-"""RVE-size study: how large a box each filler needs (issue 9, acceptance 5, box part).
+"""RVE-size study under today's model (issue 24, part 1): the box each filler needs.
 
-The generator cuts each lognormal at a largest diameter of ``ratio x box`` (default 1/3;
-up to 0.45 works with the packer's minimum-image pair search). The volume above the cut is
-filled with smaller particles, so a small box misrepresents a coarse filler. For Al2O3 and
-AlN at 60 vol% (Table 1 size distributions) and boxes of 16 ... 40 um this reports the cut
-volume at ratio 1/3 and 0.45, and, at ratio 0.45 and a 0.2 um voxel, k_iso of two seeds
-(itr_fft, tol 1e-8, gap contact model with the paper's particle-matrix resistances) with the
-wall time and peak-memory estimate of each solve. Writes ``validation/results/box_size.md``.
+For AlN-60, Al2O3-60 and the hybrid Al2O3-30-AlN-30 (Table 1 size distributions, largest
+diameter 0.45 x box, 0.16 um voxels, gap contact model, two packings per box) this solves
+k_iso at the paper's particle-matrix resistances (Table 5) and at those the default
+``itr reproduce`` identifies (gap parametrisation), for boxes of 12 ... 56 um. Every box is one
+campaign run on the campaign engine (``itr_surrogate.runner``: Dask, one Parquet part per
+task, resumable: a killed run started again redoes no finished task), in
+``validation/results/box_size_runs/<group>-<box>um``; the report is made from whatever has
+finished, so it can be written while the study runs. The box a filler needs is the smallest
+whose two-packing mean k_iso lies within 0.5 % of the next larger box's (at both resistances),
+with the packings' spread beside it. Writes ``validation/results/box_size.md``.
 
 Usage::
 
-    python validation/box_size_study.py [--boxes 16,24,32,40] [--voxel 0.2] [--seeds 1,2]
+    python validation/box_size_study.py [--groups AlN,Al2O3,hybrid] [--workers 2]
+    python validation/box_size_study.py --report-only
 """
 
 from __future__ import annotations
 
 import argparse
 import sys
-import time
-import warnings
 from pathlib import Path
 
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
-FILLERS = {"Al2O3": (1.02, 0.35, 30.0, 2.2e-8), "AlN": (1.25, 0.59, 200.0, 3.0e-8)}
-FRACTION = 0.60
+RUNS = ROOT / "validation" / "results" / "box_size_runs"
+VOXEL_UM = 0.16
+#: identified by the default ``itr reproduce`` (gap parametrisation, validation/results/
+#: reproduce_engine.md's runs) and the paper's Table 5, m^2 K/W
+R_VALUES = {"R_Al2O3_silicone": [1.67e-8, 2.2e-8], "R_AlN_silicone": [7.7e-9, 3.0e-8]}
+GROUPS = {
+    "Al2O3": {"formulation": "Al2O3-60", "boxes": [12, 16, 24, 32],
+              "values": {"R_Al2O3_silicone": R_VALUES["R_Al2O3_silicone"]}},
+    "AlN": {"formulation": "AlN-60", "boxes": [16, 24, 32, 40, 48, 56],
+            "values": {"R_AlN_silicone": R_VALUES["R_AlN_silicone"]}},
+    "hybrid": {"formulation": "Al2O3-30-AlN-30", "boxes": [16, 24, 40],
+               "values": {"R_Al2O3_silicone": [2.2e-8], "R_AlN_silicone": [3.0e-8]}},
+}
+CRITERION = 0.005
 
 
-def main() -> None:
+def campaign_dict(group: str, box: float) -> dict:
+    g = GROUPS[group]
+    return {"name": f"box-{group}-{box:g}", "box_um": float(box), "voxel_um": VOXEL_UM,
+            "replicas": 2, "seed": 1, "contact": "gap", "solver": "fft", "tol": 1e-7,
+            "block_size": 4, "formulation": [{"name": g["formulation"]}],
+            "design": {"kind": "grid", "values": g["values"]}}
+
+
+def run(groups: list[str], workers: int) -> None:
+    from itr_surrogate.campaign import Campaign
+    from itr_surrogate.runner import run_campaign
+
+    # smallest boxes first, so that results land early
+    order = sorted(((box, g) for g in groups for box in GROUPS[g]["boxes"]))
+    for box, g in order:
+        camp = Campaign.from_dict(campaign_dict(g, box))
+        print(f"== {g} {box} um ({camp.shape[0]}^3)", flush=True)
+        run_campaign(camp, RUNS / f"{g}-{box:g}um", workers=workers, progress=False)
+        report()
+
+
+def _rows(group: str) -> list[dict]:
+    from itr_surrogate.store import CampaignStore
+
+    rows = []
+    for box in GROUPS[group]["boxes"]:
+        folder = RUNS / f"{group}-{box:g}um"
+        if not folder.is_dir():
+            continue
+        for r in CampaignStore(folder).results().to_pylist():
+            rows.append({**r, "box": box})
+    return rows
+
+
+def report(out: Path = ROOT / "validation" / "results" / "box_size.md") -> None:
+    lines = ["# RVE size under today's model: the box each filler needs", "",
+             " ".join(__doc__.split("\n\n")[1].split()), ""]
+    for group, g in GROUPS.items():
+        rows = _rows(group)
+        lines += [f"## {g['formulation']}", ""]
+        if not rows:
+            lines += ["(not run yet)", ""]
+            continue
+        rnames = list(g["values"])
+        lines += ["| box (um) | n | " + " | ".join(rnames) + " | k_iso seed 1 | k_iso seed 2 | "
+                  "mean (W/mK) | seed spread | to next box | wall per solve (s) |",
+                  "|" + "---|" * (9 + len(rnames) - 1)]
+        sets = sorted({tuple(r[n] for n in rnames) for r in rows})
+        means: dict[tuple, dict[float, float]] = {s: {} for s in sets}
+        for s in sets:
+            for box in g["boxes"]:
+                ks = {r["replica"]: r["k_iso"] for r in rows
+                      if r["box"] == box and tuple(r[n] for n in rnames) == s}
+                if len(ks) == 2:
+                    means[s][box] = float(np.mean(list(ks.values())))
+        needed = {}
+        for s in sets:
+            for box in g["boxes"]:
+                sel = [r for r in rows if r["box"] == box and tuple(r[n] for n in rnames) == s]
+                if not sel:
+                    continue
+                ks = {r["replica"]: r["k_iso"] for r in sel}
+                mean = float(np.mean(list(ks.values())))
+                larger = [b for b in g["boxes"] if b > box and b in means[s]]
+                step = (f"{100 * (mean / means[s][larger[0]] - 1):+.2f} %"
+                        if larger and len(ks) == 2 else "")
+                spread = (f"{100 * abs(ks[0] - ks[1]) / mean:.2f} %" if len(ks) == 2 else "")
+                lines.append(f"| {box} | {sel[0]['n']} | " + " | ".join(f"{v:g}" for v in s)
+                             + f" | {ks.get(0, float('nan')):.4f} | {ks.get(1, float('nan')):.4f}"
+                             f" | {mean:.4f} | {spread} | {step} | "
+                             f"{np.mean([r['wall_s'] for r in sel]):.0f} |")
+            done = sorted(means[s])
+            ok = [b for i, b in enumerate(done[:-1])
+                  if all(abs(means[s][c] / means[s][done[j + 1]] - 1) <= CRITERION
+                         for j, c in enumerate(done[:-1]) if j >= i)]
+            needed[s] = ok[0] if ok else None
+        lines.append("")
+        for s, box in needed.items():
+            at = ", ".join(f"{n} = {v:g}" for n, v in zip(rnames, s))
+            lines.append(f"- at {at}: " + (
+                f"box {box} um is within {100 * CRITERION:.1f} % of every larger box solved"
+                if box is not None else
+                "no solved box is yet within 0.5 % of the next larger one (or only one box "
+                "has both packings)"))
+        lines.append("")
+    out.write_text("\n".join(lines) + "\n")
+    print(f"wrote {out}", flush=True)
+
+
+def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--boxes", default="16,24,32,40")
-    ap.add_argument("--voxel", type=float, default=0.2)
-    ap.add_argument("--seeds", default="1,2")
-    ap.add_argument("--out", default=str(ROOT / "validation" / "results" / "box_size.md"))
+    ap.add_argument("--groups", default="Al2O3,AlN,hybrid")
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--report-only", action="store_true")
     args = ap.parse_args()
-    import itr_fft
-    from itr_fv import Materials, resources
-    from itr_fv.rve import FillerSpec, generate_rve
-
-    boxes = [float(b) for b in args.boxes.split(",")]
-    seeds = [int(s) for s in args.seeds.split(",")]
-    cut_rows, k_rows = [], []
-    for name, (mu, sigma, kp, rb) in FILLERS.items():
-        spec = [FillerSpec(name, mu=mu, sigma=sigma, volume_fraction=FRACTION)]
-        mat = Materials({"silicone": 0.18, name: kp}, {(name, "silicone"): rb}, "silicone",
-                        contact="gap")
-        for box in boxes:
-            cuts = {}
-            for ratio in (1 / 3, 0.45):
-                with warnings.catch_warnings():
-                    warnings.simplefilter("ignore")
-                    _, rep = generate_rve(spec, box_um=box, voxel_um=args.voxel, seed=seeds[0],
-                                          matrix="silicone", max_diameter_box_ratio=ratio,
-                                          return_report=True)
-                cuts[ratio] = rep.fillers[0].cut_volume_high
-            cut_rows.append((name, box, cuts[1 / 3], cuts[0.45]))
-            print(name, box, cuts, flush=True)
-            for seed in seeds:
-                with warnings.catch_warnings():
-                    warnings.simplefilter("ignore")
-                    ms = generate_rve(spec, box_um=box, voxel_um=args.voxel, seed=seed,
-                                      matrix="silicone", max_diameter_box_ratio=0.45)
-                t = time.perf_counter()
-                res = itr_fft.homogenize(ms, mat, tol=1e-8, store_fields=False)
-                wall = time.perf_counter() - t
-                est = resources.estimate_peak_memory(ms.shape, "itr_fft", store_fields=False)
-                k_rows.append((name, box, seed, ms.shape[0], float(np.trace(res.k_eff) / 3),
-                               max(res.iterations), wall, est / 1e9))
-                print(*k_rows[-1], flush=True)
-    lines = ["# RVE size: the box each filler needs", "",
-             " ".join(__doc__.split("\n\n")[1].split()), "",
-             "## Volume of the size distribution removed by the box cut (replaced by smaller "
-             "particles)", "",
-             "| filler | box (um) | cut at box/3 (% of volume) | cut at 0.45 box (% of volume) |",
-             "|---|---|---|---|"]
-    lines += [f"| {n} | {b:g} | {100 * c3:.1f} | {100 * c45:.1f} |" for n, b, c3, c45 in cut_rows]
-    lines += ["", f"## k_iso vs box (0.45 box cut, {args.voxel:g} um voxel)", "",
-              "| filler | box (um) | seed | n | k_iso (W/mK) | iterations | wall (s) | memory "
-              "estimate (GB) |", "|---|---|---|---|---|---|---|---|"]
-    lines += [f"| {n} | {b:g} | {s} | {nn} | {k:.4f} | {it} | {w:.1f} | {m:.2f} |"
-              for n, b, s, nn, k, it, w, m in k_rows]
-    lines += ["", "Seed mean and spread per box:", ""]
-    for name in FILLERS:
-        for box in boxes:
-            ks = [r[4] for r in k_rows if r[0] == name and r[1] == box]
-            lines.append(f"- {name}, {box:g} um: mean {np.mean(ks):.4f}, seed spread "
-                         f"{100 * (max(ks) - min(ks)) / np.mean(ks):.1f} %")
-    Path(args.out).write_text("\n".join(lines) + "\n")
-    print(f"wrote {args.out}")
+    groups = args.groups.split(",")
+    unknown = [g for g in groups if g not in GROUPS]
+    if unknown:
+        ap.error(f"--groups: unknown group {unknown[0]!r} (known: {sorted(GROUPS)})")
+    if args.report_only:
+        report()
+    else:
+        run(groups, args.workers)
+    return 0
 
 
 if __name__ == "__main__":

@@ -145,13 +145,23 @@ def rve_arguments(p: argparse.ArgumentParser, *, box: str, voxel: str) -> None:
                    help="RVE replicas per formulation, 2-20 (default 3)")
     p.add_argument("--seed", type=number(int, 0, None, lo_open=False), default=None,
                    help="packing seed of the first replica (default 1)")
+    p.add_argument("--film-nm", type=number(float, 0, 100, lo_open=False, unit=" nm"),
+                   default=None, help="silicone film between touching particles, nm, a "
+                   "physical parameter of the packing (default 0: the packer's ~1 nm "
+                   "numerical gaps, particles in contact through their interfaces alone)")
+    p.add_argument("--psd-basis", choices=["number", "volume"], default=None,
+                   help="weighting of Table 1's lognormals (default number: the paper's "
+                   "reading; volume: a laser-diffraction analyser's default)")
 
 
 def forward_settings(fw, args: argparse.Namespace):
     """``fw`` (a ForwardSettings) with the command line's --box-um, --voxel-um, --replicas,
-    --seed; a bad value is a CLIError naming the flag."""
+    --seed, --film-nm, --psd-basis; a bad value is a CLIError naming the flag."""
+    film = getattr(args, "film_nm", None)
     changes = {k: v for k, v in (("box_um", args.box_um), ("voxel_um", args.voxel_um),
-                                 ("replicas", args.replicas), ("seed", args.seed))
+                                 ("replicas", args.replicas), ("seed", args.seed),
+                                 ("min_gap_um", None if film is None else film / 1000),
+                                 ("psd_basis", getattr(args, "psd_basis", None)))
                if v is not None}
     try:
         return fw.with_(**changes)

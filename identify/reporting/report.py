@@ -201,8 +201,9 @@ def box_cut(settings) -> dict[str, float]:
     from itr_fv.psd import LogNormalPSD
 
     d_max = settings.max_diameter_box_ratio * settings.box_um
-    return {f: LogNormalPSD(mu, sigma).mass_outside(0.0, d_max, k=3.0)[1]
-            for f, (mu, sigma) in paper_data.psd_lognormal().items()}
+    basis = getattr(settings, "psd_basis", "number")
+    return {f: LogNormalPSD(p.mu, p.sigma, basis).to_number().mass_outside(0.0, d_max, k=3.0)[1]
+            for f, p in paper_data.TABLE1.items()}
 
 
 def conductivities_used(ident: Identification) -> str:
@@ -226,6 +227,9 @@ def settings_lines(idents: Mapping[str, Identification], extra: Mapping[str, obj
              + ", ".join(f"{100 * v:.0f} % of the {f} volume" for f, v in box_cut(s).items())
              + " of Table 1's distributions (replaced by smaller particles); conductivities "
              + conductivities_used(ident),
+             f"- stated inputs: silicone film between touching particles "
+             f"{1000 * s.rve.min_gap_um:g} nm (`--film-nm`; 0 = the packer's ~1 nm numerical "
+             f"gaps), Table 1 read as {s.psd_basis}-weighted (`--psd-basis`)",
              f"- prior: log-uniform {s.prior_m2K_per_W[0]:g} - {s.prior_m2K_per_W[1]:g} "
              "m^2 K/W for every resistance; screening grid 1e-8 - 1e-5 (the paper's)",
              f"- reduced basis: relative bound gap {s.rb_tol:g}, at most {s.rb_max_solves} "
