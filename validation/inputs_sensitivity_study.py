@@ -70,7 +70,7 @@ def _mean_k(formulation: str, variant: str, r: float) -> tuple[float, float] | N
     from itr_surrogate.store import CampaignStore
 
     folder = _folder(formulation, variant)
-    if not folder.is_dir():
+    if not folder.is_dir() or not CampaignStore(folder).done_tasks():
         return None
     filler = CASES[formulation][0]
     ks = [row["k_iso"] for row in CampaignStore(folder).results().to_pylist()
@@ -84,7 +84,7 @@ def report(out: Path = ROOT / "validation" / "results" / "inputs_sensitivity.md"
     lines = ["# Sensitivity to the film at contacts and to the basis of Table 1", "",
              " ".join(__doc__.split("\n\n")[1].split()), "",
              "| formulation | variant | k_iso (W/mK) | seed spread | change vs reference | "
-             "R that gives the reference k (x R) |", "|---|---|---|---|---|---|"]
+             "equivalent change of R on the reference RVE (x R) |", "|---|---|---|---|---|---|"]
     for formulation, (filler, box, r) in CASES.items():
         ref = _mean_k(formulation, "reference", r)
         up = _mean_k(formulation, "reference", 1.5 * r)

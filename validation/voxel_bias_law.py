@@ -3,8 +3,8 @@
 ``validation/results/resolution.csv`` holds k_iso of two dense 60 % Al2O3 packings (16 um
 box) re-voxelized from 0.25 to 0.0625 um under the gap model. This script first checks that
 today's code still gives those numbers (the two coarsest voxels of both packings are solved
-again), then fits ``k(h) = k_0 (1 - c h^p)`` (h in um) with one order ``p`` shared by the packings and
-their own ``k_0`` and ``c`` (least squares in k, every voxel), and gives ``p`` with its
+again), then fits ``k(h) = k_0 (1 - c h^p)`` (h in um) with one order ``p`` shared by the
+packings and their own ``k_0`` and ``c`` (least squares in k, every voxel), and gives ``p`` with its
 standard error and the relative bias ``-c h^p`` at the voxels the package uses, with the
 spread of that bias over the two packings. Writes ``validation/results/voxel_bias_law.md``
 and ``voxel_bias_law.json`` (the law a faithful forward model can correct with).
