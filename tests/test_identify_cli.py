@@ -112,6 +112,8 @@ def test_reproduce_end_to_end_at_tiny_size(tmp_path):
     stored = {r["key"]: r for r in SolveStore(out / "solves").table().to_pylist()}
     assert set(solves["key"]) <= set(stored)
     assert "conductivities silicone 0.18, Al2O3 30, AlN 200 W/(m K)" in report
+    # the intervals say the fidelity they hold at
+    assert "The 90 % intervals hold at this fidelity only: 12 um box, 0.5 um voxels" in report
     for i, key in enumerate(solves["key"]):
         for col in ("rve_id", "k_xx", "k_yz", "k_iso", "iterations", "tol", "contact"):
             assert solves[col][i] == stored[key][col], (key, col)
