@@ -99,7 +99,7 @@ def table5_lines(idents: Mapping[str, Identification]) -> list[str]:
 def fidelity_statement(settings) -> str:
     """What the intervals hold for: the RVE they were computed on, and what they leave out."""
     s = settings
-    cut = ", ".join(f"{100 * v:.0f} % of the {f} volume" for f, v in box_cut(s).items())
+    cut = box_cut_phrase(s)
     return (f"The 90 % intervals hold at this fidelity only: {s.box_um:g} um box, "
             f"{s.voxel_um:g} um voxels, {s.replicas} packings per formulation, a "
             f"{1000 * s.rve.min_gap_um:g} nm film at contacts, Table 1 read as "
@@ -217,9 +217,13 @@ def box_cut(settings) -> dict[str, float]:
     from itr_fv.psd import LogNormalPSD
 
     d_max = settings.max_diameter_box_ratio * settings.box_um
-    basis = getattr(settings, "psd_basis", "number")
-    return {f: LogNormalPSD(p.mu, p.sigma, basis).to_number().mass_outside(0.0, d_max, k=3.0)[1]
-            for f, p in paper_data.TABLE1.items()}
+    return {f: LogNormalPSD(p.mu, p.sigma, settings.psd_basis).to_number()
+            .mass_outside(0.0, d_max, k=3.0)[1] for f, p in paper_data.TABLE1.items()}
+
+
+def box_cut_phrase(settings) -> str:
+    """:func:`box_cut` as words: ``"20 % of the Al2O3 volume, 85 % of the AlN volume"``."""
+    return ", ".join(f"{100 * v:.0f} % of the {f} volume" for f, v in box_cut(settings).items())
 
 
 def conductivities_used(ident: Identification) -> str:
@@ -240,7 +244,7 @@ def settings_lines(idents: Mapping[str, Identification], extra: Mapping[str, obj
                  f"{f} {m.seeds}" for f, m in ident.models.items()) + ")",
              f"- largest particle diameter {s.max_diameter_box_ratio:g} x box "
              f"({s.max_diameter_box_ratio * s.box_um:.1f} um): the cut removes "
-             + ", ".join(f"{100 * v:.0f} % of the {f} volume" for f, v in box_cut(s).items())
+             + box_cut_phrase(s)
              + " of Table 1's distributions (replaced by smaller particles); conductivities "
              + conductivities_used(ident),
              f"- stated inputs: silicone film between touching particles "
@@ -315,7 +319,6 @@ def difference_lines(idents: Mapping[str, Identification]) -> list[str]:
             lines.append(f"| {n} | {par} | {ident.posterior.best[n] / paper:.2g} | "
                          f"{'yes' if lo <= paper <= hi else 'no'} | {'; '.join(remarks)} |")
     s = next(iter(idents.values())).settings
-    cut = box_cut(s)
     lines += ["", "Reasons for the differences (numbered in the remarks):", "",
               f"1. Voxel: {s.voxel_um:g} um against the paper's 0.1 um. Under the per-area "
               "model the faces two touching voxelized spheres share grow with the voxel, so a "
@@ -325,7 +328,7 @@ def difference_lines(idents: Mapping[str, Identification]) -> list[str]:
               "(`validation/results/resolution.md`), which the identified resistances absorb.",
               f"2. Box: {s.box_um:g} um against 40 um. The largest particle is "
               f"{s.max_diameter_box_ratio * s.box_um:.1f} um, which removes "
-              + ", ".join(f"{100 * v:.0f} % of the {f} volume" for f, v in cut.items())
+              + box_cut_phrase(s)
               + " of Table 1; the smaller replacements add interface area per volume.",
               "3. Identifiability: under the per-area model a higher particle-matrix "
               "resistance is traded for a lower contact resistance along a ridge of the "
