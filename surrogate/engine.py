@@ -46,7 +46,7 @@ from .solver_choice import check_solver, solver_backend
 from .store import rve_id, tensor_columns, tensor_of
 
 __all__ = ["RVEData", "SolveRequest", "SolveResult", "SolveStore", "SolveEngine",
-           "open_client", "geometry_builds", "clear_problem_cache", "solve_row"]
+           "open_client", "worker_memory_limit", "geometry_builds", "clear_problem_cache", "solve_row"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -352,6 +352,35 @@ class SolveStore:
 
 
 # ---------------------------------------------------------------- the engine
+#: Resident bytes of a worker before its first task: the interpreter, numba, scipy, pyarrow,
+#: dask and the allocator's slack after a large solve (measured: ~1.5 GB above the solve's own
+#: peak at 250^3).
+WORKER_BASE_BYTES = 1.5e9
+
+
+def worker_memory_limit(task_bytes: float) -> int:
+    """The memory limit a dask worker needs to run a task whose own peak is ``task_bytes``.
+
+    Dask pauses a worker at ``distributed.worker.memory.pause`` of its limit (0.8 by default)
+    and its nanny restarts it at ``terminate`` (0.95): the limit is sized so the task's peak
+    plus :data:`WORKER_BASE_BYTES` sits at the pause mark, never near the restart.
+
+    Parameters
+    ----------
+    task_bytes : float
+        Estimated peak of one task, bytes.
+
+    Returns
+    -------
+    int
+        Bytes.
+    """
+    import dask
+
+    pause = dask.config.get("distributed.worker.memory.pause", 0.8) or 0.8
+    return int((float(task_bytes) + WORKER_BASE_BYTES) / float(pause))
+
+
 def open_client(workers: int | None, scheduler: str | None, *, memory_per_worker: int,
                 echo: Callable[[str], None] = print):
     """A dask client on ``scheduler``, or on a new LocalCluster of ``workers`` processes
@@ -433,7 +462,8 @@ class SolveEngine:
         with self._lock:
             if self._client is None:
                 from itr_fv.resources import estimate_peak_memory
-                need = int(estimate_peak_memory(shape, "itr_fft", store_fields=True) + 1e9)
+                need = worker_memory_limit(
+                    estimate_peak_memory(shape, "itr_fft", store_fields=True))
                 self._client, self._cluster = open_client(
                     self.workers, self.scheduler, memory_per_worker=need, echo=self.echo)
             return self._client

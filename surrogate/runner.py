@@ -122,15 +122,16 @@ def _row(camp: Campaign, task: Task, index: int, rid: str, mat, res, wall: float
 
 
 def worker_memory(camp: Campaign) -> int:
-    """Bytes a worker needs for one task: the solver's peak estimate with the fields kept,
-    plus the warm-start fields of a block, plus 1 GB for the interpreter and its libraries
-    (numba, scipy, pyarrow, dask: ~0.4 GB resident; dask pauses a worker at 80 % of its
-    limit)."""
+    """Memory limit of a worker, bytes: the solver's peak estimate with the fields kept plus
+    the warm-start fields of a block, sized by :func:`surrogate.engine.worker_memory_limit`
+    (interpreter and allocator slack added, peak kept at dask's pause mark)."""
     from itr_fv.resources import estimate_peak_memory
+
+    from .engine import worker_memory_limit
 
     peak = estimate_peak_memory(camp.shape, _backend(camp), store_fields=True)
     fields = 3 * 8 * int(np.prod(camp.shape)) * camp.block_size
-    return int(peak + fields + 1e9)
+    return worker_memory_limit(peak + fields)
 
 
 def _client(workers: int | None, scheduler: str | None, camp: Campaign, echo: Callable):

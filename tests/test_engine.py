@@ -101,3 +101,25 @@ def test_bad_engine_arguments():
         SolveEngine(workers=0)
     with pytest.raises(ValueError, match="--scheduler: cannot reach"):
         eng.open_client(None, "tcp://127.0.0.1:9", memory_per_worker=10**9)
+
+
+def test_worker_limit_keeps_a_measured_250_cubed_worker_below_the_pause_mark():
+    """A box-study worker on 250^3 AlN-60 (gap model, 2 parameter sets per task) was measured
+    at 5.9 GiB resident while its limit was 6.6 GB: above dask's 95 % restart mark, so the
+    nanny killed it task after task. The limit must put that resident size below the pause
+    mark (80 %)."""
+    from itr_surrogate.campaign import Campaign
+    from itr_surrogate.runner import worker_memory
+
+    camp = Campaign.from_dict({
+        "name": "box-AlN-40", "box_um": 40.0, "voxel_um": 0.16, "replicas": 2, "seed": 1,
+        "contact": "gap", "solver": "fft", "tol": 1e-7, "block_size": 4,
+        "formulation": [{"name": "AlN-60"}],
+        "design": {"kind": "grid", "values": {"R_AlN_silicone": [7.7e-9, 3e-8]}}})
+    assert camp.shape == (250, 250, 250)
+    measured = 5.9 * 2**30
+    assert 0.8 * worker_memory(camp) > measured
+    # and not absurdly above it: two such workers still fit in 24 GiB
+    assert 2 * worker_memory(camp) < 24 * 2**30
+    # a small task keeps the base of the interpreter and libraries
+    assert eng.worker_memory_limit(0) >= eng.WORKER_BASE_BYTES / 0.8
