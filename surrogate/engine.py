@@ -46,7 +46,8 @@ from .solver_choice import check_solver, solver_backend
 from .store import rve_id, tensor_columns, tensor_of
 
 __all__ = ["RVEData", "SolveRequest", "SolveResult", "SolveStore", "SolveEngine",
-           "open_client", "worker_memory_limit", "geometry_builds", "clear_problem_cache", "solve_row"]
+           "open_client", "worker_memory_limit", "geometry_builds", "clear_problem_cache",
+           "solve_row"]
 
 
 @dataclass(frozen=True, eq=False)

@@ -8,7 +8,8 @@ import pytest
 
 from itr_identify.cli import main
 
-TINY = ["--box-um", "12", "--voxel-um", "0.5", "--replicas", "2", "--no-progress"]
+TINY = ["--box-um", "12", "--voxel-um", "0.5", "--replicas", "2", "--no-progress",
+        "--fidelity", "quick"]
 
 
 def write(path, text):

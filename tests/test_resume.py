@@ -23,7 +23,7 @@ from itr_surrogate.engine import SolveStore, clear_problem_cache
 BIN = Path(sys.executable).parent
 #: CI size: gap parametrisation only, 24^3 voxels, two replicas, no leave-one-out.
 TINY = ["--box-um", "12", "--voxel-um", "0.5", "--replicas", "2", "--no-progress",
-        "--parametrisation", "gap"]
+        "--fidelity", "quick", "--parametrisation", "gap"]
 REPRODUCE = ["reproduce", *TINY, "--no-leave-one-out"]
 DISCREPANCY = ["discrepancy", "--box-um", "12", "--voxel-um", "0.5", "--replicas", "2",
                "--effects", "matrix", "--no-progress"]

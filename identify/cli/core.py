@@ -212,17 +212,20 @@ def identification_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--parametrisation", choices=["area", "gap", "both"], default="both",
                    help="area (the paper's per-area contact resistance), gap (physical "
                    "contacts) or both (default)")
-    rve_arguments(p, box="12; --full 40", voxel="0.25; --full 0.1")
+    rve_arguments(p, box="12", voxel="0.25")
+    p.add_argument("--fidelity", choices=["quick", "standard", "paper"], default=None,
+                   help="where the gap parametrisation's models are corrected by full solves: "
+                   "quick (none: the 12 um RVE's level), standard (default: 24 um boxes at "
+                   "0.2 and 0.25 um), paper (40 um boxes at 0.1 and 0.125 um; hours)")
     engine_arguments(p)
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
 
 
-def reproduce_settings(args: argparse.Namespace, full: bool = False):
-    """The ReproduceSettings of ``itr reproduce`` and ``itr identify`` from their flags
-    (``full``: start from the paper's RVE, ``--full``)."""
-    from ..workflows.reproduce import ReproduceSettings
+def reproduce_settings(args: argparse.Namespace):
+    """The ReproduceSettings of ``itr reproduce`` and ``itr identify`` from their flags."""
+    from ..workflows.reproduce import DEFAULT_FIDELITY, ReproduceSettings
 
-    base = ReproduceSettings.full() if full else ReproduceSettings()
+    base = ReproduceSettings.at_fidelity(args.fidelity or DEFAULT_FIDELITY)
     fw = forward_settings(base.forward, args)
     pars = ("area", "gap") if args.parametrisation == "both" else (args.parametrisation,)
     return ReproduceSettings(forward=fw, parametrisations=pars,

@@ -12,7 +12,7 @@ __all__ = ["add_parser"]
 def _run(args: argparse.Namespace) -> int:
     from ..workflows.reproduce import run_reproduce
 
-    settings = reproduce_settings(args, full=args.full)
+    settings = reproduce_settings(args)
     with output_folder(args.out) as out:
         run_reproduce(settings, out, progress=not args.no_progress, **engine_options(args))
     return 0
@@ -27,8 +27,6 @@ def add_parser(sub) -> None:
                          ".vti, full_solves.parquet, manifest.json. About 10 min on 2 cores.")
     rep.add_argument("--out", default="itr-reproduce", help="output folder "
                      "(default itr-reproduce)")
-    rep.add_argument("--full", action="store_true", help="the paper's RVE: 40 um box, 0.1 um "
-                     "voxels (400^3; not measured here: expect hours)")
     rep.add_argument("--no-leave-one-out", action="store_true",
                      help="skip the leave-one-formulation-out study")
     identification_arguments(rep)

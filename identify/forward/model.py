@@ -45,6 +45,8 @@ from itr_surrogate.engine import (
 )
 from itr_surrogate.reduced_basis import ReducedBasis
 
+from .fidelity import Correction, FaithfulRVE
+
 __all__ = ["Parametrisation", "PARAMETRISATIONS", "ForwardSettings", "ForwardModel",
            "full_solve", "MATRIX"]
 
@@ -135,6 +137,10 @@ class ForwardSettings:
         diameters) or ``"volume"`` (a laser-diffraction analyser's default; its number
         median is smaller by exp(3 sigma^2): 2.84x for AlN, 1.44x for Al2O3). A stated
         input of the identification, reported with the identified values.
+    faithful : FaithfulRVE, optional
+        Where the gap parametrisation's models are corrected by full solves on faithful
+        RVEs (:mod:`itr_identify.forward.fidelity`); None: no correction, the results hold
+        at :attr:`rve`'s fidelity only.
     """
 
     rve: RVESpec = RVESpec(box_um=16.0, voxel_um=0.25)
@@ -144,8 +150,12 @@ class ForwardSettings:
     rb_max_solves: int = 30
     solver_tol: float = 1e-8
     psd_basis: str = "number"
+    faithful: FaithfulRVE | None = None
 
     def __post_init__(self) -> None:
+        if self.faithful is not None and not isinstance(self.faithful, FaithfulRVE):
+            raise ValueError(f"faithful: expected a FaithfulRVE or None, got "
+                             f"{type(self.faithful).__name__}")
         if self.psd_basis not in ("number", "volume"):
             raise ValueError(f"psd_basis: expected 'number' or 'volume', got "
                              f"{self.psd_basis!r}")
@@ -172,6 +182,7 @@ class ForwardSettings:
         d = asdict(self)
         del d["rve"]
         d["prior_m2K_per_W"] = list(self.prior_m2K_per_W)
+        d["faithful"] = self.faithful.to_dict() if self.faithful is not None else None
         return {**self.rve.to_dict(), **d}
 
     def with_(self, **changes) -> "ForwardSettings":
@@ -224,6 +235,9 @@ class ForwardModel:
     seeds: list[int] = field(default_factory=list)
     fixed: dict[str, float] = field(default_factory=dict)
     carried_scatter: float = 0.0
+    correction: Correction | None = None
+    corrections: list[Correction] = field(default_factory=list)  # every round, in order
+    faithful_rves: list = field(default_factory=list)   # (RVEData, seed) per faithful packing
     build_seconds: float = 0.0
     engine: SolveEngine | None = field(default=None, repr=False, compare=False)
 
@@ -335,6 +349,12 @@ class ForwardModel:
         first replica's reduced basis times :attr:`replica_factor`
         (clipped into the reduced basis's box: see :meth:`outside_fraction`). Without
         varied parameters, the full solve of the first replica at :attr:`fixed`."""
+        k, err = self._predict_raw(columns)
+        c = self._factor_of(columns, k.size)
+        return k * c, err * c
+
+    def _predict_raw(self, columns: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`predict` without the faithful correction."""
         if self.rb is None:
             n = self._n_rows(columns)
             return np.full(n, float(self.replica_k.mean())), np.zeros(n)
@@ -342,6 +362,76 @@ class ForwardModel:
         lower, upper = self.rb.bounds_of(cols)
         k = np.trace(self.rb.predict(cols), axis1=1, axis2=2) / 3.0
         return k * self.replica_factor, (upper - lower).mean(axis=1) * self.replica_factor
+
+    def _factor_of(self, columns: Mapping[str, np.ndarray], n: int) -> np.ndarray:
+        """The faithful correction's factor for each row of ``columns``: the last
+        correction's; with one varied parameter and two corrections at different values,
+        the line through the last two in log10 of the parameter (extrapolated at most one
+        span beyond them), so that the corrected model is exact at both and repeated
+        corrections converge as a secant method."""
+        if self.correction is None:
+            return np.ones(n)
+        last = self.correction
+        if len(self.parameters) == 1 and len(self.corrections) >= 2:
+            p = self.parameters[0]
+            prev = self.corrections[-2]
+            xa, xb = math.log10(prev.at[p]), math.log10(last.at[p])
+            if abs(xb - xa) > 1e-9:
+                lo, hi = min(xa, xb), max(xa, xb)
+                span = hi - lo
+                x = np.clip(np.log10(np.broadcast_to(np.asarray(columns[p], float), (n,))),
+                            lo - span, hi + span)
+                slope = (last.factor - prev.factor) / (xb - xa)
+                return last.factor + slope * (x - xb)
+        return np.full(n, last.factor)
+
+    @property
+    def fidelity_factor(self) -> float:
+        """The last faithful correction's factor (:class:`~itr_identify.forward.fidelity.
+        Correction`; 1 without one), at the point it was computed at."""
+        return self.correction.factor if self.correction is not None else 1.0
+
+    @property
+    def model_sd(self) -> float:
+        """Relative standard uncertainty of the model's level beyond its own RVE scatter:
+        the earlier stages' spread and the faithful correction's uncertainty, in
+        quadrature."""
+        u = self.correction.relative_sd if self.correction is not None else 0.0
+        return math.hypot(self.carried_scatter, u)
+
+    def correct_at(self, values: Mapping[str, float], faithful: FaithfulRVE) -> Correction:
+        """Correct the model's level at ``values`` by full solves on faithful packings
+        (packed once, re-voxelized at the coarse voxel; every solve on the engine and in
+        :attr:`solves`); returns the correction, also kept in :attr:`correction` and
+        :attr:`corrections`."""
+        values = {p: float(values[p]) for p in self.parameters}
+        fillers = list(self.fractions)
+        with _local_work():
+            if not self.faithful_rves:
+                spec = faithful.spec_for(fillers, self.settings.rve)
+                for j in range(faithful.packings):
+                    ms, seed = build_rve(spec, _specs(self.fractions, self.settings.psd_basis),
+                                         j, matrix=MATRIX, warn_box_cut=False)
+                    self.faithful_rves.append((RVEData.of(ms), seed))
+            mat = self.materials(values)
+            k_model = float(self._predict_raw({p: np.array([v])
+                                               for p, v in values.items()})[0][0])
+        coarse = faithful.coarse_shape(fillers)
+        requests = []
+        for j, (rve, _) in enumerate(self.faithful_rves):
+            for grid, label in ((rve, "fine"), (replace(rve, shape=coarse), "coarse")):
+                requests.append(SolveRequest.for_materials(
+                    grid, mat, self.settings.solver_tol, purpose=f"faithful {label}",
+                    formulation=self.formulation, replica=faithful.seed + j))
+        with _local_work():
+            results = self._solve_recorded(requests)
+        k = np.array([res.k_diagonal for res in results])
+        corr = Correction(values, faithful.box_for(fillers), faithful.voxel_um,
+                          faithful.coarse_voxel_um, [s for _, s in self.faithful_rves],
+                          k_model, k[0::2], k[1::2])
+        self.correction = corr
+        self.corrections.append(corr)
+        return corr
 
     @property
     def replica_factor(self) -> float:

@@ -7,8 +7,9 @@ its degrees of freedom by Welch-Satterthwaite) of squared scale
     v(theta) = s^2 / n  +  (sigma_rve k(theta))^2  +  e(theta)^2,
 
 ``s^2 / n`` the replicate variance of the mean (:mod:`itr_identify.inference.measurements`)
-(plus ``(sigma_c k)^2`` in a later stage: the spread of its k_iso over the earlier stages'
-posterior, see :mod:`itr_identify.inference.pipeline`), ``sigma_rve`` the relative
+(plus ``(u k)^2``, ``u`` the model level's relative uncertainty: in a later stage the spread
+of its k_iso over the earlier stages' posterior, see :mod:`itr_identify.inference.pipeline`,
+and the faithful correction's, :mod:`itr_identify.forward.fidelity`), ``sigma_rve`` the relative
 RVE-to-RVE scatter of the k_iso of one RVE
 (:attr:`itr_identify.forward.model.ForwardModel.rve_scatter`, pooled over a filler system),
 ``k`` the forward model's k_iso (the first replica's reduced basis scaled to the replica
@@ -234,7 +235,7 @@ def _stage_loglike(models: Mapping[str, ForwardModel], stage: Stage, meas: Measu
     for f in stage.formulations:
         k, err = models[f].predict(columns)
         se = meas.standard_error(f)
-        v = variance(se, k, err, scatter, models[f].carried_scatter)
+        v = variance(se, k, err, scatter, models[f].model_sd)
         total = total + log_likelihood(meas.mean(f) - k, v, se ** 2, meas.values[f].size)
     return total
 
@@ -256,10 +257,11 @@ def log_likelihood(residual: np.ndarray, v: np.ndarray, v_measured: float,
 
 
 def variance(standard_error: float, k: np.ndarray, err: np.ndarray, scatter: float,
-             carried: float = 0.0) -> np.ndarray:
-    """Likelihood variance, (W/(m K))^2: replicate variance of the mean, RVE scatter,
-    earlier stages' spread (relative ``carried``) and the surrogate's error bound."""
-    return standard_error ** 2 + ((scatter * k) ** 2 + (carried * k) ** 2) + err ** 2
+             model_sd: float = 0.0) -> np.ndarray:
+    """Likelihood variance, (W/(m K))^2: replicate variance of the mean, RVE scatter, the
+    model level's relative uncertainty ``model_sd`` (earlier stages' spread and faithful
+    correction, :attr:`ForwardModel.model_sd`) and the surrogate's error bound."""
+    return standard_error ** 2 + ((scatter * k) ** 2 + (model_sd * k) ** 2) + err ** 2
 
 
 def _identifiability(names: Sequence[str], log_samples: np.ndarray,

@@ -50,6 +50,7 @@ class Identification:
     screening: list[ScreenResult]
     seconds: dict[str, float] = field(default_factory=dict)
     measurements: Measurements | None = None
+    fidelity_rounds: list[dict] = field(default_factory=list)
 
     @property
     def n_parameters(self) -> int:
@@ -66,7 +67,7 @@ class Identification:
             for f in stage.formulations:
                 m = self.models[f]
                 k, err = m.predict({p: np.array([self.posterior.best[p]]) for p in m.parameters})
-                v = variance(self.measurements.standard_error(f), k, err, s, m.carried_scatter)
+                v = variance(self.measurements.standard_error(f), k, err, s, m.model_sd)
                 out[f] = (self.measurements.mean(f), float(k[0]), float(v[0]))
         return out
 
@@ -126,6 +127,8 @@ def identify(measurements: Measurements, parametrisation: str = "gap", *,
     comps = {f: fractions_of(f) for f in measurements.formulations}
     singles = [f for f in comps if len(comps[f]) == 1]
     multis = [f for f in comps if len(comps[f]) > 1]
+    faithful = settings.faithful if par.name == "gap" else None
+    rounds: list[dict] = []
     t0 = time.perf_counter()
     models: dict[str, ForwardModel] = {}
     todo = {}
@@ -142,6 +145,11 @@ def identify(measurements: Measurements, parametrisation: str = "gap", *,
     t = time.perf_counter()
     post = _anchored(models, singles, measurements, grid_points, seed) if singles else None
     seconds["single-filler calibration and anchors"] = time.perf_counter() - t
+    if post is not None and faithful is not None:
+        t = time.perf_counter()
+        post = _corrected(models, singles, measurements, post, faithful, grid_points, seed,
+                          rounds, echo)
+        seconds["single-filler faithful corrections"] = time.perf_counter() - t
     t = time.perf_counter()
     central = post.central() if post is not None else {}
     fixed_of = {f: {p: central[p] for p in par.parameters(list(comps[f])) if p in central}
@@ -155,11 +163,16 @@ def identify(measurements: Measurements, parametrisation: str = "gap", *,
     elif multis or post is None:
         post = calibrate(models, measurements, grid_points=grid_points, seed=seed)
     seconds["two-filler models, anchors and final calibration"] = time.perf_counter() - t
+    if multis and faithful is not None:
+        t = time.perf_counter()
+        post = _corrected(models, multis, measurements, post, faithful, grid_points, seed,
+                          rounds, echo)
+        seconds["two-filler faithful corrections"] = time.perf_counter() - t
     t = time.perf_counter()
     screening = hierarchical_screen(models, measurements)
     seconds["screening"] = time.perf_counter() - t
     return Identification(parametrisation, settings, models, post, screening, seconds,
-                          measurements)
+                          measurements, rounds)
 
 
 def _anchored(models: dict[str, ForwardModel], names: list[str], measurements: Measurements,
@@ -171,6 +184,53 @@ def _anchored(models: dict[str, ForwardModel], names: list[str], measurements: M
     for f in names:
         models[f].anchor_at(post.best)
     return calibrate(models, measurements, grid_points=grid_points, seed=seed)
+
+
+def _moves(before: Posterior, after: Posterior, names: list[str]) -> dict[str, float]:
+    """Per parameter: how far the best point moved, in units of its 90 % interval's width
+    (log10)."""
+    out = {}
+    for p in names:
+        lo, hi = after.interval(p)
+        width = max(math.log10(hi / lo), 1e-12)
+        out[p] = abs(math.log10(after.best[p] / before.best[p])) / width
+    return out
+
+
+def _corrected(models: dict[str, ForwardModel], names: list[str], measurements: Measurements,
+               post: Posterior, faithful, grid_points: int, seed: int, rounds: list[dict],
+               echo: Callable[[str], None]) -> Posterior:
+    """Correct the models ``names`` on faithful RVEs at the best point and calibrate again,
+    until the best point of every parameter they identify moves less than
+    ``faithful.move_tolerance`` of its 90 % interval (at most ``faithful.max_rounds``
+    corrections); each round is appended to ``rounds``."""
+    own = sorted({p for f in names for p in models[f].parameters})
+    for r in range(1, faithful.max_rounds + 1):
+        t = time.perf_counter()
+        for f in names:
+            models[f].correct_at(post.best, faithful)
+        new = calibrate(models, measurements, grid_points=grid_points, seed=seed)
+        moves = _moves(post, new, own)
+        rounds.append({"round": r, "formulations": list(names),
+                       "at": {p: post.best[p] for p in own},
+                       "best": {p: new.best[p] for p in own},
+                       "factors": {f: models[f].fidelity_factor for f in names},
+                       "relative_sd": {f: models[f].correction.relative_sd for f in names},
+                       "moves": moves, "seconds": time.perf_counter() - t})
+        post = new
+        done = all(m < faithful.move_tolerance for m in moves.values())
+        echo(f"  faithful correction {r} ({', '.join(names)}): factors "
+             + ", ".join(f"{models[f].fidelity_factor:.3f}" for f in names) + "; best "
+             + ", ".join(f"{p} {new.best[p]:.2e}" for p in own) + "; moved "
+             + ", ".join(f"{m:.2f}" for m in moves.values()) + " of the 90 % interval")
+        if done or not own:
+            rounds[-1]["converged"] = True
+            break
+    else:
+        rounds[-1]["converged"] = False
+        echo(f"  faithful correction: the best point still moved after "
+             f"{faithful.max_rounds} rounds (see identified.json)")
+    return post
 
 
 def _carried_scatter(model: ForwardModel, posterior: Posterior, seed: int) -> float:

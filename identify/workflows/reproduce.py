@@ -24,6 +24,7 @@ from itr_fv.io import atomic_path, begin_run, write_manifest, write_text
 from itr_fv.rve_spec import RVESpec
 from itr_surrogate.engine import SolveEngine
 
+from ..forward.fidelity import faithful_for, fidelity_name
 from ..forward.model import ForwardSettings
 from ..inference.measurements import Measurements, read_measurements
 from ..inference.pipeline import Identification, identify
@@ -33,25 +34,37 @@ from ..reporting import figures, report
 __all__ = ["ReproduceSettings", "run_reproduce", "run_identify", "write_solves"]
 
 
+#: The fidelity level of ``itr reproduce`` and ``itr identify`` by default.
+DEFAULT_FIDELITY = "standard"
+
+
 @dataclass(frozen=True)
 class ReproduceSettings:
-    """Settings of ``itr reproduce``; :meth:`full` gives the paper's RVE (40 um, 0.1 um)."""
+    """Settings of ``itr reproduce`` and ``itr identify``: reduced bases on 12 um RVEs at
+    0.25 um, corrected (gap parametrisation) on the faithful RVEs of the fidelity level
+    (:meth:`at_fidelity`, :mod:`itr_identify.forward.fidelity`)."""
 
     forward: ForwardSettings = field(default_factory=lambda: ForwardSettings(
-        RVESpec(box_um=12.0, voxel_um=0.25)))
+        RVESpec(box_um=12.0, voxel_um=0.25), faithful=faithful_for(DEFAULT_FIDELITY)))
     parametrisations: tuple[str, ...] = ("area", "gap")
     grid_points: int = 121
     seed: int = 0
     leave_one_out: bool = True
 
     @classmethod
-    def full(cls) -> "ReproduceSettings":
-        return cls(forward=ForwardSettings(RVESpec(box_um=40.0, voxel_um=0.1)))
+    def at_fidelity(cls, level: str) -> "ReproduceSettings":
+        """Default settings at fidelity ``level`` (``quick``, ``standard``, ``paper``)."""
+        return cls(forward=cls().forward.with_(faithful=faithful_for(level)))
+
+    @property
+    def fidelity(self) -> str:
+        return fidelity_name(self.forward.faithful)
 
     def to_dict(self) -> dict:
         d = asdict(self)
         d["forward"] = self.forward.to_dict()
         d["parametrisations"] = list(self.parametrisations)
+        d["fidelity"] = self.fidelity
         return d
 
 

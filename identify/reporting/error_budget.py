@@ -1,0 +1,233 @@
+"""The numerical error budget of an identification, per formulation and per resistance.
+
+Every source of error of the forward model is given as a relative effect on k_iso at the
+best point (per formulation), next to the measurement noise of that formulation's mean, and
+as its effect on each identified resistance: a relative change ``delta`` of the model's
+k_iso moves a resistance by the factor ``exp(-delta / s)``, ``s = d ln k / d ln R`` of the
+formulations that identify it (their mean). The sources:
+
+- in the likelihood (the 90 % intervals carry them): the measurement noise, the RVE-to-RVE
+  scatter, the reduced basis's error bound and, at a fidelity level with faithful RVEs, the
+  faithful correction's uncertainty (:mod:`itr_identify.forward.fidelity`);
+- applied, not a source: the faithful correction itself (the box's cut of the coarse tail
+  and the voxel's bias, removed by the faithful solves);
+- outside the likelihood (the intervals do not carry them), from the package's own studies
+  (``identify/data/numerical_studies.csv``, written by
+  ``validation/numerical_studies_table.py``): the box effect beyond the box the level
+  solves on (the largest box of the RVE-size study against it), the voxel bias where no
+  correction removes it (the Al2O3-60 bias law), and the stated inputs: a 2 or 5 nm
+  silicone film at contacts instead of none, Table 1 read as volume-weighted.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from collections.abc import Mapping
+from functools import lru_cache
+from importlib import resources
+
+import numpy as np
+
+from ..inference.calibrate import pooled_scatter, stages_of
+from ..inference.pipeline import Identification
+
+__all__ = ["error_budget", "error_budget_lines", "numerical_studies"]
+
+#: Relative step of the resistance for d ln k / d ln R.
+_STEP = 1.1
+
+
+@lru_cache(maxsize=1)
+def numerical_studies() -> tuple[dict, ...]:
+    """Rows of ``identify/data/numerical_studies.csv``: system, quantity, box_um, voxel_um,
+    value, unit, source."""
+    text = resources.files("itr_identify").joinpath("data/numerical_studies.csv").read_text()
+    rows = []
+    for r in csv.DictReader(text.splitlines()):
+        rows.append({**r, "box_um": float(r["box_um"]), "voxel_um": float(r["voxel_um"]),
+                     "value": float(r["value"])})
+    return tuple(rows)
+
+
+def _system(fillers) -> str:
+    return "hybrid" if len(fillers) > 1 else next(iter(fillers))
+
+
+def _box_effect(system: str, box_um: float) -> tuple[float | None, str]:
+    """Relative k_iso of the largest studied box over ``box_um``'s, and how it is known."""
+    boxes = {r["box_um"]: r["value"] for r in numerical_studies()
+             if r["system"] == system and r["quantity"] == "k_iso_box"}
+    if not boxes:
+        return None, "not studied"
+    largest = max(boxes)
+    if box_um >= largest:
+        return None, f"not measured: the study's largest box is {largest:g} um"
+    if box_um in boxes:
+        return boxes[largest] / boxes[box_um] - 1, f"{box_um:g} -> {largest:g} um"
+    smaller = [b for b in boxes if b > box_um]
+    b = min(smaller)
+    return (boxes[largest] / boxes[b] - 1,
+            f"at least: {b:g} -> {largest:g} um ({box_um:g} um not studied)")
+
+
+def _input_effect(system: str, quantity: str) -> tuple[float | None, str]:
+    vals = {r["system"]: r["value"] for r in numerical_studies() if r["quantity"] == quantity}
+    if system in vals:
+        return vals[system], f"{system}-60"
+    if system == "hybrid" and vals:
+        return float(np.mean(list(vals.values()))), "mean of the single-filler studies"
+    return None, "not studied"
+
+
+def _voxel_bias(voxel_um: float) -> tuple[float | None, str]:
+    vals = {r["voxel_um"]: r["value"] for r in numerical_studies()
+            if r["quantity"] == "voxel_bias"}
+    for h, v in vals.items():
+        if math.isclose(h, voxel_um, rel_tol=1e-9):
+            return v, "Al2O3-60 bias law"
+    return None, "no bias law at this voxel"
+
+
+def _slope(model, best: Mapping[str, float], p: str) -> float:
+    """d ln k / d ln R_p of the model at ``best`` (central difference, factor 1.1)."""
+    up = {q: np.array([best[q] * (_STEP if q == p else 1.0)]) for q in model.parameters}
+    dn = {q: np.array([best[q] / (_STEP if q == p else 1.0)]) for q in model.parameters}
+    return float(math.log(model.predict(up)[0][0] / model.predict(dn)[0][0])
+                 / (2 * math.log(_STEP)))
+
+
+def error_budget(ident: Identification) -> dict:
+    """The budget as JSON-ready data: ``formulations`` (per formulation: the relative
+    effects on k_iso, each with ``value``, ``in_likelihood`` and ``basis``), ``parameters``
+    (per identified resistance: d ln k / d ln R and each effect as a factor on R, the 90 %
+    interval's half-width as a factor), ``dominant`` and ``numerical_below_noise``."""
+    post, s = ident.posterior, ident.settings
+    best = post.best
+    faithful = s.faithful if ident.parametrisation == "gap" else None
+    forms: dict[str, dict] = {}
+    for stage in stages_of(ident.models):
+        scatter = pooled_scatter([ident.models[f] for f in stage.formulations])
+        for f in stage.formulations:
+            m = ident.models[f]
+            k, err = m.predict({p: np.array([best[p]]) for p in m.parameters})
+            meas = ident.measurements
+            system = _system(m.fractions)
+            items: dict[str, dict] = {
+                "measurement noise": {"value": meas.standard_error(f) / meas.mean(f),
+                                      "in_likelihood": True, "basis": "standard error of the "
+                                      "mean of the replicates"},
+                "RVE scatter": {"value": scatter, "in_likelihood": True,
+                                "basis": f"{s.replicas} packings of {s.box_um:g} um"},
+                "surrogate error": {"value": float(err[0] / k[0]), "in_likelihood": True,
+                                    "basis": "reduced basis's certified bound"},
+            }
+            corr = m.correction
+            if corr is not None:
+                items["faithful correction (applied)"] = {
+                    "value": corr.factor - 1, "in_likelihood": False,
+                    "basis": f"{corr.box_um:g} um box at {corr.voxel_um:g}/"
+                             f"{corr.coarse_voxel_um:g} um, {len(corr.seeds)} packings"}
+                items["of it: voxel bias removed (applied)"] = {
+                    "value": -corr.voxel_bias, "in_likelihood": False,
+                    "basis": f"Richardson, p = {corr.order:.2f}"}
+                items["correction uncertainty"] = {
+                    "value": corr.relative_sd, "in_likelihood": True,
+                    "basis": "faithful packings' scatter and the bias order's uncertainty"}
+                box = corr.box_um
+            else:
+                bias, basis = _voxel_bias(s.voxel_um)
+                items["voxel bias (not corrected)"] = {
+                    "value": None if bias is None else -bias, "in_likelihood": False,
+                    "basis": basis}
+                box = s.box_um
+            eff, basis = _box_effect(system, box)
+            items["box effect beyond the box solved"] = {"value": eff, "in_likelihood": False,
+                                                         "basis": basis}
+            for name, q in (("film 2 nm", "film_2nm"), ("film 5 nm", "film_5nm"),
+                            ("Table 1 volume-weighted", "psd_volume")):
+                v, basis = _input_effect(system, q)
+                items[name] = {"value": v, "in_likelihood": False, "basis": basis}
+            numerical = [items[n]["value"] for n in ("RVE scatter", "surrogate error",
+                                                     "correction uncertainty",
+                                                     "voxel bias (not corrected)",
+                                                     "box effect beyond the box solved")
+                         if n in items and items[n]["value"] is not None]
+            forms[f] = {"system": system, "k_iso": float(k[0]), "items": items,
+                        "numerical_rss": float(math.hypot(*numerical)) if numerical else 0.0,
+                        "slopes": {p: _slope(m, best, p) for p in m.parameters}}
+    params: dict[str, dict] = {}
+    for p in post.names:
+        using = [f for f, d in forms.items() if p in d["slopes"]]
+        if not using:
+            continue
+        slope = float(np.mean([forms[f]["slopes"][p] for f in using]))
+        lo, hi = post.interval(p)
+        factors = {}
+        for name in forms[using[0]]["items"]:
+            vals = [forms[f]["items"][name]["value"] for f in using]
+            if any(v is None for v in vals) or abs(slope) < 1e-6:
+                factors[name] = None
+                continue
+            delta = float(np.mean(vals))
+            if name in ("measurement noise", "RVE scatter", "surrogate error",
+                        "correction uncertainty"):
+                delta = -abs(delta)  # a standard deviation: shown as the factor of +1 sd
+            factors[name] = math.exp(-delta / slope)
+        params[p] = {"formulations": using, "dlnk_dlnR": slope,
+                     "interval_half_width_factor": math.sqrt(hi / lo), "factors": factors}
+    ranked: dict[str, float] = {}
+    for p, d in params.items():
+        for name, fct in d["factors"].items():
+            if fct is not None and "applied" not in name:  # applied: not an error
+                ranked[name] = max(ranked.get(name, 0.0), abs(math.log(fct)))
+    dominant = sorted(ranked, key=ranked.get, reverse=True)[:3]
+    below = {f: d["numerical_rss"] < d["items"]["measurement noise"]["value"]
+             for f, d in forms.items()}
+    return {"fidelity": "quick" if faithful is None else faithful.name,
+            "formulations": forms, "parameters": params, "dominant": dominant,
+            "numerical_below_noise": below}
+
+
+def _pct(v: float | None) -> str:
+    return "n/a" if v is None else f"{100 * v:+.1f} %"
+
+
+def error_budget_lines(ident: Identification, budget: dict | None = None) -> list[str]:
+    """The budget as Markdown: per formulation the effects on k_iso, then per resistance
+    the factors, and the verdict."""
+    b = budget or error_budget(ident)
+    forms = b["formulations"]
+    names = list(next(iter(forms.values()))["items"])
+    lines = [f"Error budget, {ident.parametrisation} parametrisation (fidelity "
+             f"`{b['fidelity']}`): relative effect on k_iso at the best point; `*` marks "
+             "what the likelihood (and so the 90 % interval) carries; +-values are standard "
+             "deviations, signed values are shifts the model would see if the effect were "
+             "taken in.", "",
+             "| formulation | " + " | ".join(n + (" *" if forms[next(iter(forms))]["items"][n]
+                                                    ["in_likelihood"] else "")
+                                             for n in names) + " | numerical (rss) |",
+             "|" + "---|" * (len(names) + 2)]
+    for f, d in forms.items():
+        cells = []
+        for n in names:
+            it = d["items"][n]
+            v = it["value"]
+            cells.append("n/a" if v is None else (f"+-{100 * abs(v):.1f} %"
+                                                   if it["in_likelihood"] else _pct(v)))
+        lines.append(f"| {f} | " + " | ".join(cells) + f" | {100 * d['numerical_rss']:.1f} % |")
+    lines += ["", "| resistance | d ln k / d ln R | 90 % interval (x/÷) | " +
+              " | ".join(n for n in names) + " |", "|" + "---|" * (len(names) + 3)]
+    for p, d in b["parameters"].items():
+        cells = ["n/a" if d["factors"][n] is None else f"x{d['factors'][n]:.2f}"
+                 for n in names]
+        lines.append(f"| {p} | {d['dlnk_dlnR']:.3f} | {d['interval_half_width_factor']:.2f} | "
+                     + " | ".join(cells) + " |")
+    n_below = sum(b["numerical_below_noise"].values())
+    lines += ["", f"Largest effects on the resistances: {', '.join(b['dominant'])}. The "
+              f"numerical error (RVE scatter, surrogate, correction, uncorrected voxel bias, "
+              f"box beyond the box solved, in quadrature) is below the measurement noise in "
+              f"{n_below} of {len(forms)} formulations. Bases: "
+              + "; ".join(f"{n}: {forms[next(iter(forms))]['items'][n]['basis']}"
+                          for n in names) + "."]
+    return lines
