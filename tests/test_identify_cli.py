@@ -7,6 +7,7 @@ import pyarrow.parquet as pq
 import pytest
 
 from itr_identify.cli import main
+from itr_identify.inference.measurements import read_measurements
 
 TINY = ["--box-um", "12", "--voxel-um", "0.5", "--replicas", "2", "--no-progress",
         "--fidelity", "quick"]
@@ -58,6 +59,7 @@ def test_identify_bad_tables_fail_in_one_line(tmp_path, capsys, text, expected):
     (["reproduce", "--replicas", "1"], "--replicas"),
     (["reproduce", "--parametrisation", "spots"], "--parametrisation"),
     (["reproduce", "--box-um", "-2"], "--box-um"),
+    (["reproduce", "--fidelity", "best"], "--fidelity"),
 ])
 def test_bad_invocations_fail_in_one_line(tmp_path, capsys, args, expected):
     assert main([*args, "--out", str(tmp_path / "o")]) == 2
@@ -96,9 +98,22 @@ def test_reproduce_end_to_end_at_tiny_size(tmp_path):
                 assert lo <= v <= hi
     assert data["selection"]["bic"].keys() == {"area", "gap"}
     report = (out / "report.md").read_text()
+    table3 = read_measurements()
     for heading in ("Table 1", "Table 3", "Table 5", "Table 6", "Leave one formulation out",
-                    "Identifiability"):
+                    "Identifiability", "Error budget, gap parametrisation (fidelity `quick`)"):
         assert heading in report
+    for par in ("area", "gap"):
+        budget = data[par]["error_budget"]
+        assert budget["fidelity"] == "quick" and data[par]["settings"]["faithful"] is None
+        for f, d in budget["formulations"].items():
+            # Table 3's replicates: standard error of the mean over the mean
+            k = table3.values[f]
+            assert d["items"]["measurement noise"]["value"] == pytest.approx(
+                k.std(ddof=1) / np.sqrt(k.size) / k.mean())
+            assert d["numerical_rss"] > 0
+            # no faithful correction at the quick level: the voxel bias stays in the budget
+            assert "voxel bias (not corrected)" in d["items"]
+        assert set(budget["parameters"]) <= set(data[par]["parameters"])
     # every identified value against the paper's Table 5 names the reasons that bear on it
     against = report.split("### Against the paper's Table 5")[1].split("\n\n")[1]
     rows = against.splitlines()[2:]

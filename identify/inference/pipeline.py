@@ -201,29 +201,33 @@ def _corrected(models: dict[str, ForwardModel], names: list[str], measurements: 
                post: Posterior, faithful, grid_points: int, seed: int, rounds: list[dict],
                echo: Callable[[str], None]) -> Posterior:
     """Correct the models ``names`` on faithful RVEs at the best point and calibrate again,
-    until the best point of every parameter they identify moves less than
+    until the best value of every parameter they identify moves less than
     ``faithful.move_tolerance`` of its 90 % interval (at most ``faithful.max_rounds``
-    corrections); each round is appended to ``rounds``."""
-    own = sorted({p for f in names for p in models[f].parameters})
+    corrections); each round is appended to ``rounds``. A model whose own parameters have
+    stopped moving is not corrected again (the stages are independent: another filler's
+    corrections do not move them)."""
+    todo = list(names)
     for r in range(1, faithful.max_rounds + 1):
         t = time.perf_counter()
-        for f in names:
+        own = sorted({p for f in todo for p in models[f].parameters})
+        for f in todo:
             models[f].correct_at(post.best, faithful)
         new = calibrate(models, measurements, grid_points=grid_points, seed=seed)
         moves = _moves(post, new, own)
-        rounds.append({"round": r, "formulations": list(names),
+        rounds.append({"round": r, "formulations": list(todo),
                        "at": {p: post.best[p] for p in own},
                        "best": {p: new.best[p] for p in own},
-                       "factors": {f: models[f].fidelity_factor for f in names},
-                       "relative_sd": {f: models[f].correction.relative_sd for f in names},
+                       "factors": {f: models[f].fidelity_factor for f in todo},
+                       "relative_sd": {f: models[f].correction.relative_sd for f in todo},
                        "moves": moves, "seconds": time.perf_counter() - t})
-        post = new
-        done = all(m < faithful.move_tolerance for m in moves.values())
-        echo(f"  faithful correction {r} ({', '.join(names)}): factors "
-             + ", ".join(f"{models[f].fidelity_factor:.3f}" for f in names) + "; best "
+        echo(f"  faithful correction {r} ({', '.join(todo)}): factors "
+             + ", ".join(f"{models[f].fidelity_factor:.3f}" for f in todo) + "; best "
              + ", ".join(f"{p} {new.best[p]:.2e}" for p in own) + "; moved "
              + ", ".join(f"{m:.2f}" for m in moves.values()) + " of the 90 % interval")
-        if done or not own:
+        post = new
+        todo = [f for f in todo
+                if any(moves[p] >= faithful.move_tolerance for p in models[f].parameters)]
+        if not todo:
             rounds[-1]["converged"] = True
             break
     else:

@@ -34,8 +34,10 @@ from ..reporting import figures, report
 __all__ = ["ReproduceSettings", "run_reproduce", "run_identify", "write_solves"]
 
 
-#: The fidelity level of ``itr reproduce`` and ``itr identify`` by default.
-DEFAULT_FIDELITY = "standard"
+#: The fidelity level of ``itr reproduce`` and ``itr identify`` by default: ``quick`` (12 min on
+#: 2 cores); ``standard`` took 48 min (validation/results/reproduce_fidelity.md), beyond what
+#: the README's first command and CI can spend.
+DEFAULT_FIDELITY = "quick"
 
 
 @dataclass(frozen=True)
