@@ -29,6 +29,7 @@ class _StubModel:
         self.parameters = tuple(f"R_{f}_silicone" for f in sorted(self.fractions))
         self.rve_scatter = 0.01
         self.carried_scatter = 0.0
+        self.model_sd = 0.0          # earlier stages' spread and faithful correction
         self.settings = SimpleNamespace(prior_m2K_per_W=(1e-9, 1e-5))
 
     def predict(self, columns):

@@ -29,6 +29,7 @@ from importlib import resources
 
 import numpy as np
 
+from ..forward.fidelity import fidelity_name
 from ..inference.calibrate import pooled_scatter, stages_of
 from ..inference.pipeline import Identification
 
@@ -184,7 +185,10 @@ def error_budget(ident: Identification) -> dict:
     dominant = sorted(ranked, key=ranked.get, reverse=True)[:3]
     below = {f: d["numerical_rss"] < d["items"]["measurement noise"]["value"]
              for f, d in forms.items()}
-    return {"fidelity": "quick" if faithful is None else faithful.name,
+    level = fidelity_name(s.faithful)
+    if s.faithful is not None and faithful is None:
+        level += " (not applied to the area parametrisation)"
+    return {"fidelity": level,
             "formulations": forms, "parameters": params, "dominant": dominant,
             "numerical_below_noise": below}
 
