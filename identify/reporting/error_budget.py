@@ -231,7 +231,11 @@ def error_budget_lines(ident: Identification, budget: dict | None = None) -> lis
     lines += ["", f"Largest effects on the resistances: {', '.join(b['dominant'])}. The "
               f"numerical error (RVE scatter, surrogate, correction, uncorrected voxel bias, "
               f"box beyond the box solved, in quadrature) is below the measurement noise in "
-              f"{n_below} of {len(forms)} formulations. Bases: "
-              + "; ".join(f"{n}: {forms[next(iter(forms))]['items'][n]['basis']}"
-                          for n in names) + "."]
+              f"{n_below} of {len(forms)} formulations."]
+    first_of = {}
+    for f, d in forms.items():
+        first_of.setdefault(d["system"], f)
+    for system, f in first_of.items():
+        lines.append(f"- bases for {system}: " + "; ".join(
+            f"{n}: {forms[f]['items'][n]['basis']}" for n in names) + ".")
     return lines
