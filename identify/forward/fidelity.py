@@ -41,14 +41,22 @@ import numpy as np
 
 from itr_fv.rve_spec import RVESpec, voxels_per_edge
 
-__all__ = ["FaithfulRVE", "Correction", "richardson", "BIAS_ORDER", "BIAS_ORDER_SE",
-           "FIDELITY_LEVELS", "faithful_for", "fidelity_name"]
+__all__ = ["FaithfulRVE", "Correction", "richardson", "direction_scatter", "BIAS_ORDER",
+           "BIAS_ORDER_SE", "FIDELITY_LEVELS", "faithful_for", "fidelity_name"]
 
 #: Order p of the gap model's voxel bias k(h) = k_0 (1 - c h^p) and its standard error,
 #: fitted on two Al2O3-60 packings re-voxelized from 0.25 to 0.0625 um
 #: (``validation/results/voxel_bias_law.md``).
 BIAS_ORDER = 1.292
 BIAS_ORDER_SE = 0.065
+
+
+def direction_scatter(k: np.ndarray) -> float:
+    """Relative scatter of one RVE's k_iso from the diagonal entries ``k`` (RVEs, 3) of
+    several RVEs: ``sd(all entries) / mean / sqrt(3)`` (three times the samples of the
+    k_iso spread alone)."""
+    k = np.asarray(k, dtype=np.float64).ravel()
+    return float(k.std(ddof=1) / k.mean() / math.sqrt(3))
 
 
 def richardson(k_fine: np.ndarray, k_coarse: np.ndarray, ratio: float,
@@ -213,8 +221,7 @@ class Correction:
     @property
     def packing_scatter(self) -> float:
         """Relative scatter of one faithful packing's k_iso (direction-based)."""
-        k = self.extrapolated.ravel()
-        return float(k.std(ddof=1) / k.mean() / math.sqrt(3))
+        return direction_scatter(self.extrapolated)
 
     @property
     def order_uncertainty(self) -> float:
