@@ -11,6 +11,7 @@ verified:
   for spheres with an interface resistance.
 * :func:`maxwell_garnett` -- the Maxwell-Garnett (= Hashin-Shtrikman lower) formula.
 * :func:`hashin_shtrikman` -- the Hashin-Shtrikman bounds of an isotropic two-phase composite.
+* :func:`hashin_shtrikman_multiphase` -- the same bounds for any number of phases (in W/(m K)).
 * :func:`laminate` -- exact conductivity of a periodic layered medium, normal and parallel to the
   layers, with interface resistances.
 
@@ -57,6 +58,7 @@ __all__ = [
     "maxwell_garnett",
     "hasselman_johnson",
     "hashin_shtrikman",
+    "hashin_shtrikman_multiphase",
     "laminate",
 ]
 
@@ -617,6 +619,53 @@ def hashin_shtrikman(f: float, k_ratio: float) -> tuple[float, float]:
     a = hs(1.0, 1.0 - f, k, f)   # matrix as reference
     b = hs(k, f, 1.0, 1.0 - f)   # inclusion as reference
     return (min(a, b), max(a, b))
+
+
+def hashin_shtrikman_multiphase(fractions: Sequence[float], conductivities: Sequence[float]
+                                ) -> tuple[float, float]:
+    """Hashin-Shtrikman bounds of an isotropic composite of any number of phases, W/(m K).
+
+    With perfect interfaces, volume fractions ``f_i`` (summing to 1) and conductivities
+    ``k_i``::
+
+        k_HS(k_ref) = [ sum_i f_i / (k_i + 2 k_ref) ]^-1 - 2 k_ref
+
+    is the lower bound for ``k_ref = min k_i`` and the upper bound for ``k_ref = max k_i``.
+    An interface resistance only lowers the effective conductivity, so the upper bound
+    holds for any resistance >= 0; for two phases both equal :func:`hashin_shtrikman`.
+
+    Parameters
+    ----------
+    fractions : sequence of float
+        Volume fractions in [0, 1], summing to 1 (to 1e-9).
+    conductivities : sequence of float
+        Phase conductivities, W/(m K), finite and > 0, one per fraction.
+
+    Returns
+    -------
+    (lower, upper) : tuple of float
+        Bounds on the effective conductivity, W/(m K).
+
+    References
+    ----------
+    Z. Hashin and S. Shtrikman, J. Appl. Phys. 33 (1962) 3125-3131.
+    """
+    f = np.asarray([_check_real("fractions", x) for x in fractions], dtype=np.float64)
+    k = np.asarray([_check_real("conductivities", x) for x in conductivities],
+                   dtype=np.float64)
+    if f.size == 0 or f.shape != k.shape:
+        raise ValueError("fractions, conductivities: expected two non-empty sequences of the "
+                         f"same length, got {f.size} and {k.size}")
+    if np.any(f < 0) or np.any(f > 1) or abs(float(f.sum()) - 1.0) > 1e-9:
+        raise ValueError(f"fractions: expected values in [0, 1] summing to 1, got {f.tolist()}")
+    if np.any(k <= 0):
+        raise ValueError(f"conductivities: expected values > 0 W/(m K), got {k.tolist()}")
+
+    def bound(k_ref: float) -> float:
+        return float(1.0 / np.sum(f / (k + 2.0 * k_ref)) - 2.0 * k_ref)
+
+    present = k[f > 0]
+    return bound(float(present.min())), bound(float(present.max()))
 
 
 def laminate(thicknesses_m: Sequence[float], conductivities: Sequence[float],

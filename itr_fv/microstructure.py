@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -54,6 +55,46 @@ def _positive_length(value: float, argument: str) -> float:
     if v <= 0.0:
         raise ValueError(f"{argument} must be finite and > 0 (m), got {v!r}")
     return v
+
+
+def periodic_pieces(mask: np.ndarray) -> int:
+    """Face-connected pieces of the voxels ``mask`` in the periodic box (a piece that leaves
+    the box on one face and enters on the opposite one counts once)."""
+    from scipy import ndimage
+
+    labels, n = ndimage.label(mask)
+    if n < 2:
+        return n
+    parent = np.arange(n + 1)
+
+    def root(i: int) -> int:
+        while parent[i] != i:
+            parent[i] = parent[parent[i]]
+            i = parent[i]
+        return i
+
+    for axis in range(3):
+        a = np.take(labels, 0, axis=axis).ravel()
+        b = np.take(labels, -1, axis=axis).ravel()
+        for i, j in set(zip(a[(a > 0) & (b > 0)].tolist(), b[(a > 0) & (b > 0)].tolist())):
+            parent[root(i)] = root(j)
+    return len({root(i) for i in range(1, n + 1)})
+
+
+def _warn_phase_ids_as_particles(mid: np.ndarray, pid: np.ndarray) -> None:
+    """Warn when the particle ids are the phase ids and a 'particle' is several pieces."""
+    if pid.max() == 0 or not np.array_equal(mid, pid):
+        return
+    for p in range(1, int(pid.max()) + 1):
+        pieces = periodic_pieces(pid == p)
+        if pieces > 1:
+            warnings.warn(f"particle_ids: they equal material_ids, and particle {p} is "
+                          f"{pieces} separate pieces: each phase is taken as one particle, so "
+                          "the contacts between its particles are not seen (the gap contact "
+                          "model and the contact resistances act only between particle ids); "
+                          "label each particle (e.g. scipy.ndimage.label per phase)",
+                          UserWarning, stacklevel=3)
+            return
 
 
 def _int_labels(a: object, argument: str) -> np.ndarray:
@@ -109,7 +150,9 @@ class Microstructure:
             0 = matrix, ``i`` = ``names[i]``.
         particle_ids : int array, shape (n1, n2, n3)
             0 = matrix, 1.. = particle index. A voxel is matrix in both arrays or in neither,
-            and every particle has a single material.
+            and every particle has a single material. Particle ids equal to the material ids
+            where a phase falls into several pieces are warned about: each phase would be one
+            particle, without contacts inside it.
         voxel_m : float
             Voxel edge, m.
         names : sequence of str
@@ -149,6 +192,7 @@ class Microstructure:
             if np.any(lo[1:][present] != hi[1:][present]):
                 bad = int(np.flatnonzero(present & (lo[1:] != hi[1:]))[0]) + 1
                 raise ValueError(f"particle_ids: particle {bad} spans several material ids")
+            _warn_phase_ids_as_particles(mid, pid)
         if particles is not None:
             if not isinstance(particles, ParticleTable):
                 raise ValueError("particles: expected a ParticleTable")

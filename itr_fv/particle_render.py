@@ -90,10 +90,18 @@ def render_particles(ms: Microstructure, path: str, colors: Mapping[str, str] | 
         mesh = cloud.glyph(geom=sphere, scale="radius", orient=False)
         if periodic_images:
             mesh = mesh.clip_box(bounds, invert=False)
-        pl.add_mesh(mesh, color=cmap[name], smooth_shading=True, label=name)
+        pl.add_mesh(mesh, color=cmap[name], smooth_shading=True)
     if show_box:
         pl.add_mesh(pv.Box(bounds).outline(), color="black", line_width=2)
-    pl.add_legend(bcolor="white", size=(0.24, 0.12))
+        # a scale along the front lower box edge, in um
+        pl.add_ruler([0.0, box_um[1], 0.0], [box_um[0], box_um[1], 0.0], title="um",
+                     number_labels=3,
+                     label_format="%.0f", font_size_factor=0.8)
+    # the legend: each phase's name in its colour, upper left (vtk's legend box scales a
+    # lone entry's text past the window's edge)
+    for i, name in enumerate(dict.fromkeys(mats.tolist())):
+        pl.add_text(str(name), position=(12, window_size[1] - 34 * (i + 1)), font_size=14,
+                    color=cmap[name])
     pl.camera_position = "iso"
     with atomic_path(path) as tmp:
         pl.screenshot(str(tmp))

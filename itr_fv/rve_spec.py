@@ -6,9 +6,11 @@ identification, the discrepancy workflow and the demo compose it (their own sett
 theirs), so a box and voxel are checked by one rule with one message
 (:func:`voxels_per_edge`), here and nowhere else.
 
-The rule: the box edge holds a whole number of voxel edges, to 1e-6 relative, and at least
-:data:`MIN_VOXELS_PER_EDGE` of them (fewer cannot resolve a sphere, and the FFT and AMG
-solvers' grids assume it).
+The rule: both lengths are micrometres at the scale of a particle composite (at least
+:data:`MIN_LENGTH_UM`, at most :data:`MAX_LENGTH_UM`; a length in metres, such as
+``box_um = 6e-6``, is refused before anything is packed or solved); the box edge holds a
+whole number of voxel edges, to 1e-6 relative, and at least :data:`MIN_VOXELS_PER_EDGE` of
+them (fewer cannot resolve a sphere, and the FFT and AMG solvers' grids assume it).
 """
 
 from __future__ import annotations
@@ -18,10 +20,15 @@ from dataclasses import asdict, dataclass, fields, replace
 from typing import Any
 
 __all__ = ["RVESpec", "voxels_per_edge", "MIN_VOXELS_PER_EDGE", "MAX_DIAMETER_BOX_RATIO",
-           "PACKING_ATTEMPTS", "SEED_STRIDE"]
+           "PACKING_ATTEMPTS", "SEED_STRIDE", "MIN_LENGTH_UM", "MAX_LENGTH_UM"]
 
 #: Fewest voxels along the box edge.
 MIN_VOXELS_PER_EDGE = 8
+#: Shortest box or voxel edge, um: one nanometre, below which heat conduction in the
+#: matrix is no longer a continuum property.
+MIN_LENGTH_UM = 1e-3
+#: Longest box or voxel edge, um: one centimetre, beyond any sample of these composites.
+MAX_LENGTH_UM = 1e4
 #: Largest particle diameter / box edge unless a caller says otherwise: 0.45 keeps a sphere
 #: clear of its own periodic image and cuts less of the coarse tail than 1/3 (the box-size
 #: study, ``validation/results/box_size.md``).
@@ -55,13 +62,21 @@ def voxels_per_edge(box_um: Any, voxel_um: Any) -> int:
     Raises
     ------
     ValueError
-        A length that is not a finite number > 0 (named), or a box that does not hold a
+        A length that is not a finite number > 0 or lies outside [:data:`MIN_LENGTH_UM`,
+        :data:`MAX_LENGTH_UM`] (named), or a box that does not hold a
         whole number >= 8 of voxels (``box_um/voxel_um: ...``; the same message wherever an
         RVE is specified).
     """
     for name, value in (("box_um", box_um), ("voxel_um", voxel_um)):
         if not _is_number(value) or value <= 0:
             raise ValueError(f"{name}: expected a length > 0 in um, got {value!r}")
+        if value < MIN_LENGTH_UM:
+            raise ValueError(f"{name}: {value:g} um is below a nanometre, where conduction is "
+                             f"no continuum; lengths are in micrometres (if {value:g} is in "
+                             f"metres, it is {value * 1e6:g} um)")
+        if value > MAX_LENGTH_UM:
+            raise ValueError(f"{name}: {value:g} um is above a centimetre; lengths are in "
+                             f"micrometres (if {value:g} is in nm, it is {value / 1e3:g} um)")
     n = box_um / voxel_um
     if abs(n - round(n)) > 1e-6 * n or round(n) < MIN_VOXELS_PER_EDGE:
         raise ValueError(f"box_um/voxel_um: a {box_um:g} um box holds {n:.6g} voxels of "

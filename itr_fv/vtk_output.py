@@ -201,9 +201,10 @@ def render_png(result: FieldResult, path: str | Path, load_case: int = 0,
     if edges.n_points:
         pl.add_mesh(edges, color="white", line_width=1.5)
     pl.add_mesh(grid.outline(), color="black")
-    k = np.diag(result.k_eff)
-    ktxt = ", ".join("nan" if not np.isfinite(v) else f"{v:.4g}" for v in k)
-    pl.add_text(f"heat flux for E along x{d + 1}\nk_eff diagonal = ({ktxt}) W/(m K)",
+    # only the solved directions: the others' entries are not known (NaN)
+    ktxt = ", ".join(f"k_{j + 1}{j + 1} = {result.k_eff[j, j]:.4g}" for j in result.directions
+                     if np.isfinite(result.k_eff[j, j]))
+    pl.add_text(f"heat flux for E along x{d + 1}\n{ktxt} W/(m K)",
                 position="upper_left", font_size=11, color="black")
     pl.camera_position = "iso"
     pl.subplot(0, 1)

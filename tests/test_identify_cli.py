@@ -8,6 +8,7 @@ import pytest
 
 from itr_identify.cli import main
 from itr_identify.inference.measurements import read_measurements
+from itr_identify.reporting.headline import FLAGS
 
 TINY = ["--box-um", "12", "--voxel-um", "0.5", "--replicas", "2", "--no-progress",
         "--fidelity", "quick"]
@@ -34,7 +35,16 @@ def test_identify_writes_identified_json(tmp_path, capsys):
     assert "R_Al2O3_silicone" in report and "Al2O3-62" in report
     manifest = json.loads((out / "manifest.json").read_text())
     assert {f["path"] for f in manifest["files"]} >= {"identified.json", "report.md"}
-    assert "identify: done" in capsys.readouterr().out
+    stdout = capsys.readouterr().out
+    assert "identify: done" in stdout
+    # the headline: on the terminal with interval and flag, at the top of the report, in json
+    head = data["headline"]
+    e = head["parameters"]["gap"]["R_Al2O3_silicone"]
+    assert e["interval_90"] == [lo, hi] and e["flag"] in FLAGS
+    assert head["quote"] == "gap" and head["fidelity"] == "quick"
+    assert f"R_Al2O3_silicone = {e['best']:.2e} m^2 K/W (90 % interval {lo:.2e} - " \
+           f"{hi:.2e}; {e['flag']})" in stdout
+    assert report.split("\n## ")[1].startswith("Headline")
 
 
 @pytest.mark.parametrize("text, expected", [

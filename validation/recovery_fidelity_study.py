@@ -9,8 +9,9 @@ and 0.2 um voxels of the same particles, extrapolated to h -> 0 with the bias la
 averaged. Measurements: four replicates per formulation with Table 3's replicate noise of
 that filler (:func:`itr_identify.discrepancy.synthetic.paper_noise`), ten noise seeds.
 Identification: ``itr identify --fidelity standard`` (12 um / 0.25 um reduced bases corrected on
-24 um packings at 0.2 / 0.25 um; gap parametrisation, 121 grid points); the cheap forward models and faithful packings are built once and reused by
-every seed (they do not depend on the data), each seed's corrections are its own. Every full
+24 um packings at 0.2 / 0.25 um; gap parametrisation, 121 grid points); the cheap forward
+models and faithful packings are built once and reused by every seed (they do not depend on
+the data), each seed's corrections are its own. Every full
 solve runs on the solve engine with a store in ``validation/results/recovery_fidelity_runs/``
 (a killed run redoes no finished solve) and each seed's result is written there as it
 finishes. Writes ``validation/results/recovery_fidelity.md``.

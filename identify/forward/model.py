@@ -353,6 +353,16 @@ class ForwardModel:
         c = self._factor_of(columns, k.size)
         return k * c, err * c
 
+    def first_replica_k(self, values: Mapping[str, float]) -> float:
+        """k_iso of the first replica's reduced basis at ``values`` (m^2 K/W), W/(m K):
+        without the replica factor and the faithful correction, the number a full solve of
+        that replica checks."""
+        if self.rb is None:
+            raise ValueError("values: this model holds its parameters fixed; it has no "
+                             "reduced basis")
+        cols = self.clipped({p: np.array([values[p]]) for p in self.parameters})
+        return float(np.trace(self.rb.predict(cols)[0]) / 3.0)
+
     def _predict_raw(self, columns: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`predict` without the faithful correction."""
         if self.rb is None:

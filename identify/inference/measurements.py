@@ -11,9 +11,13 @@ Two kinds of CSV file:
   thicknesses. The contact resistance between sample and meter bars is the intercept of
   ``I = a t + b`` (Eq. 8), so ``K = 1 / a`` (Eq. 10) with the slope's standard error.
 
-Every formulation needs at least two replicates (its variance enters the likelihood of
-:mod:`itr_identify.inference.calibrate`); errors are ValueErrors that name the file, the line
-and the column.
+Every formulation needs at least two replicates that differ (their variance enters the
+likelihood of :mod:`itr_identify.inference.calibrate`). Formulation names are those of
+:func:`~itr_identify.inference.formulations.fractions_of` (Table 2 or ``<filler>-<vol%>``),
+as on the command line. Values are checked for physical sense while they are read
+(:mod:`~itr_identify.inference.plausibility`: a conductivity no resistance can reach, a
+thickness that is no sample's), before any solve. Errors are ValueErrors that name the file,
+the line and the column.
 """
 
 from __future__ import annotations
@@ -25,6 +29,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+
+from .formulations import fractions_of
+from .plausibility import check_conductivity, check_thickness
 
 __all__ = ["Measurements", "read_measurements", "read_tester_readings",
            "conductivity_from_impedance", "TABLE3"]
@@ -103,6 +110,12 @@ def _rows(path: Path, text: str, columns: tuple[str, ...]) -> list[tuple[int, di
     reader = csv.DictReader(text.splitlines())
     header = [h.strip() for h in (reader.fieldnames or [])]
     missing = [c for c in columns if c not in header]
+    if missing and len(header) == 1:
+        for sep, what in ((";", "semicolons"), ("\t", "tabs")):
+            if sep in header[0]:
+                raise ValueError(f"{path.name}: the columns are separated by {what}; expected "
+                                 f"a comma-separated file with the columns "
+                                 f"{', '.join(columns)} (and '.' as the decimal mark)")
     if missing:
         raise ValueError(f"{path.name}: missing column {missing[0]!r} (expected "
                          f"{', '.join(columns)}; found {', '.join(header) or 'nothing'})")
@@ -141,20 +154,25 @@ def _check_formulation(path: Path, line: int, name: str, known) -> None:
                          f"{', '.join(sorted(known))})")
 
 
-def _known_formulations() -> set[str]:
-    from itr_fv import paper_data
-
-    return set(paper_data.formulations())
-
-
 def _finish(path: Path, values: dict[str, list[float]], source: str,
             thickness: dict[str, list[float]] | None = None) -> Measurements:
     for name, v in values.items():
         if len(v) < 2:
             raise ValueError(f"{path.name}: formulation {name!r} has {len(v)} replicate; at "
                              "least 2 are needed for its variance")
+        if max(v) == min(v):
+            raise ValueError(f"{path.name}: the {len(v)} replicates of {name!r} are all "
+                             f"{v[0]:g}; their variance (zero) enters the likelihood, so they "
+                             "must be separate measurements")
     t = None if not thickness else {k: np.array(v) * 1e-3 for k, v in thickness.items()}
     return Measurements({k: np.array(v) for k, v in values.items()}, source, t)
+
+
+def _known(formulations: set[str] | Callable[[str], object] | None
+           ) -> set[str] | Callable[[str], object]:
+    if formulations is None:
+        return fractions_of
+    return formulations if callable(formulations) else set(formulations)
 
 
 def read_measurements(path: str | Path | None = None, *,
@@ -168,16 +186,23 @@ def read_measurements(path: str | Path | None = None, *,
         CSV with columns ``formulation,replicate,k_W_per_mK`` and optionally
         ``thickness_mm`` (then on every row).
     formulations : set of str or callable, optional
-        Names the table may use (default: the paper's Table 2 formulations), or a function
-        that raises ValueError for a name it does not accept (e.g.
-        :func:`itr_identify.inference.formulations.fractions_of`).
+        Names the table may use, or a function that raises ValueError for a name it does not
+        accept (default: :func:`itr_identify.inference.formulations.fractions_of`, the
+        command line's: Table 2 names and ``<filler>-<vol%>`` pairs).
 
     Raises
     ------
     ValueError
-        Naming file, line and column: missing column, non-numeric, NaN, zero or negative k,
-        unknown formulation, a replicate given twice, fewer than 2 replicates, a missing or
-        non-positive thickness where the column exists.
+        Naming file, line and column: missing column (or a separator other than the comma),
+        non-numeric, NaN, zero or negative k, k above what any resistance allows, unknown or
+        fraction-like formulation, a replicate given twice, fewer than 2 replicates or
+        identical ones, a missing, non-positive or implausible thickness where the column
+        exists.
+
+    Warns
+    -----
+    itr_identify.inference.plausibility.ImplausibleMeasurementWarning
+        A k below the matrix's conductivity.
     """
     if path is None:
         from itr_fv import paper_data
@@ -186,8 +211,7 @@ def read_measurements(path: str | Path | None = None, *,
     else:
         p = Path(path)
         text = _read_text(p)
-    known = _known_formulations() if formulations is None else (
-        formulations if callable(formulations) else set(formulations))
+    known = _known(formulations)
     values: dict[str, list[float]] = {}
     thickness: dict[str, list[float]] = {}
     seen: set[tuple[str, str]] = set()
@@ -200,9 +224,13 @@ def read_measurements(path: str | Path | None = None, *,
         if (name, rep) in seen:
             raise ValueError(f"{p.name} line {line}: replicate {rep!r} of {name!r} given twice")
         seen.add((name, rep))
-        values.setdefault(name, []).append(_number(p, line, row, "k_W_per_mK"))
+        k = _number(p, line, row, "k_W_per_mK")
+        check_conductivity(f"{p.name} line {line}", name, k)
+        values.setdefault(name, []).append(k)
         if with_thickness:
-            thickness.setdefault(name, []).append(_number(p, line, row, THICKNESS_COLUMN))
+            t = _number(p, line, row, THICKNESS_COLUMN)
+            check_thickness(f"{p.name} line {line}", t)
+            thickness.setdefault(name, []).append(t)
     return _finish(p, values, TABLE3 if path is None else str(p), thickness)
 
 
@@ -255,13 +283,14 @@ def read_tester_readings(path: str | Path, *,
     (formulation, replicate) are one sample, in increasing thickness.
     """
     p = Path(path)
-    known = _known_formulations() if formulations is None else (
-        formulations if callable(formulations) else set(formulations))
+    known = _known(formulations)
     samples: dict[tuple[str, str], list[tuple[int, float, float]]] = {}
     for line, row in _rows(p, _read_text(p), READING_COLUMNS):
         name = row["formulation"]
         _check_formulation(p, line, name, known)
-        t = _number(p, line, row, "thickness_mm") * 1e-3
+        t_mm = _number(p, line, row, "thickness_mm")
+        check_thickness(f"{p.name} line {line}", t_mm)
+        t = t_mm * 1e-3
         imp = _number(p, line, row, "impedance_K_mm2_per_W") * 1e-6
         samples.setdefault((name, row["replicate"]), []).append((line, t, imp))
     values: dict[str, list[float]] = {}
@@ -279,5 +308,7 @@ def read_tester_readings(path: str | Path, *,
         except ValueError as exc:
             raise ValueError(f"{p.name} line {pts[0][0]}: {name!r} replicate {rep!r}: "
                              f"{exc}") from None
+        check_conductivity(f"{p.name} lines {pts[0][0]}-{pts[-1][0]}", name, k,
+                           column="K = 1/slope of impedance_K_mm2_per_W")
         values.setdefault(name, []).append(k)
     return _finish(p, values, str(p))

@@ -139,14 +139,21 @@ def identify(measurements: Measurements, parametrisation: str = "gap", *,
             models[f] = old
         else:
             todo[f] = {}
+    if todo:
+        echo(f"  {par.name}: single-filler models ({len(todo)}: RVEs, reduced bases, "
+             "RVE scatter)")
     models.update(_build_all(todo, comps, par, settings, progress, echo, engine))
     models = {f: models[f] for f in singles}
     seconds = {"single-filler models": time.perf_counter() - t0}
     t = time.perf_counter()
+    if singles:
+        echo(f"  {par.name}: calibration of {len(singles)} single-filler formulations, "
+             "replicas solved at the best point")
     post = _anchored(models, singles, measurements, grid_points, seed) if singles else None
     seconds["single-filler calibration and anchors"] = time.perf_counter() - t
     if post is not None and faithful is not None:
         t = time.perf_counter()
+        echo(f"  {par.name}: faithful corrections of the single-filler models ({faithful.name})")
         post = _corrected(models, singles, measurements, post, faithful, grid_points, seed,
                           rounds, echo)
         seconds["single-filler faithful corrections"] = time.perf_counter() - t
@@ -154,7 +161,13 @@ def identify(measurements: Measurements, parametrisation: str = "gap", *,
     central = post.central() if post is not None else {}
     fixed_of = {f: {p: central[p] for p in par.parameters(list(comps[f])) if p in central}
                 for f in multis}
+    if multis:
+        echo(f"  {par.name}: two-filler models ({len(multis)}), held at the single-filler "
+             "posterior's central point")
     models.update(_build_all(fixed_of, comps, par, settings, progress, echo, engine))
+    if multis:
+        echo(f"  {par.name}: two-filler spread over the single-filler posterior, anchors and "
+             "final calibration")
     for f in multis:
         if fixed_of[f]:
             models[f].carried_scatter = _carried_scatter(models[f], post, seed)
@@ -165,10 +178,12 @@ def identify(measurements: Measurements, parametrisation: str = "gap", *,
     seconds["two-filler models, anchors and final calibration"] = time.perf_counter() - t
     if multis and faithful is not None:
         t = time.perf_counter()
+        echo(f"  {par.name}: faithful corrections of the two-filler models ({faithful.name})")
         post = _corrected(models, multis, measurements, post, faithful, grid_points, seed,
                           rounds, echo)
         seconds["two-filler faithful corrections"] = time.perf_counter() - t
     t = time.perf_counter()
+    echo(f"  {par.name}: the paper's screening (Eq. 4 on its grid)")
     screening = hierarchical_screen(models, measurements)
     seconds["screening"] = time.perf_counter() - t
     return Identification(parametrisation, settings, models, post, screening, seconds,
@@ -265,18 +280,27 @@ def _build_all(fixed_of: Mapping[str, dict[str, float]], comps: Mapping[str, dic
         m = ForwardModel(f, comps[f], par, settings, fixed=dict(fixed_of[f]), engine=engine)
         return m.build(progress=progress)
 
+    from tqdm.auto import tqdm
+
     names = list(fixed_of)
-    if engine is not None and engine.distributed and len(names) > 1:
-        with ThreadPoolExecutor(max_workers=len(names)) as pool:
-            built = dict(zip(names, pool.map(build, names)))
+    bar = tqdm(total=len(names), desc=f"{par.name} models", unit="formulation",
+               disable=not progress or not names)
+    with bar:
+        if engine is not None and engine.distributed and len(names) > 1:
+            with ThreadPoolExecutor(max_workers=len(names)) as pool:
+                built = {}
+                for f, m in zip(names, pool.map(build, names)):
+                    built[f] = m
+                    bar.update(1)
+            for f in names:
+                echo(_describe(built[f]))
+            return built
+        built = {}
         for f in names:
+            built[f] = build(f)
+            bar.update(1)
             echo(_describe(built[f]))
         return built
-    built = {}
-    for f in names:
-        built[f] = build(f)
-        echo(_describe(built[f]))
-    return built
 
 
 def _describe(m: ForwardModel) -> str:

@@ -90,6 +90,13 @@ class ScreenResult:
         row = self._combos()[int(np.argmin(self.delta))]
         return {n: float(v) for n, v in zip(self.names, row)}
 
+    def at_grid_edge(self) -> dict[str, str | None]:
+        """Per parameter: ``"lower"`` or ``"upper"`` where the best value is the grid's first
+        or last value (the minimum of Eq. 4 may lie beyond the grid), else None."""
+        lo, hi = float(self.grid.min()), float(self.grid.max())
+        return {n: "lower" if v <= lo else "upper" if v >= hi else None
+                for n, v in self.best.items()}
+
     def ranges(self) -> dict[str, tuple[float, float]]:
         """Per parameter, the range over the selected sets, m^2 K/W."""
         sel = self.selected
@@ -103,7 +110,7 @@ class ScreenResult:
 
     def to_dict(self) -> dict:
         return {"system": list(self.system), "formulations": list(self.formulations),
-                "fixed": self.fixed, "best": self.best,
+                "fixed": self.fixed, "best": self.best, "best_at_grid_edge": self.at_grid_edge(),
                 "range_lowest_1pct": {n: list(r) for n, r in self.ranges().items()},
                 "delta_min_W_per_mK": float(self.delta.min()),
                 "delta_cut_W_per_mK": float(np.quantile(self.delta, self.quantile)),

@@ -94,6 +94,8 @@ def leave_one_out(models: Mapping[str, ForwardModel], measurements: Measurements
         if missing:
             rows.append({"formulation": name, "skipped": f"without it nothing identifies "
                                                           f"{', '.join(missing)}"})
+            if tick is not None:
+                tick()
             continue
         meas = measurements.mean(name)
         med, lo, hi = posterior_prediction(

@@ -9,10 +9,12 @@ import numpy as np
 
 from itr_fv import paper_data
 from itr_fv.parameters import parse_parameter
+from itr_fv.rve_spec import SEED_STRIDE
 
 from ..inference.measurements import Measurements
 from ..inference.pipeline import Identification
 from .error_budget import error_budget, error_budget_lines
+from .headline import EDGE_FACTOR
 
 __all__ = ["identified_dict", "selection", "table3_lines", "table5_lines", "fidelity_statement",
            "table6_lines",
@@ -40,8 +42,10 @@ def identified_dict(ident: Identification) -> dict:
     post = ident.posterior.to_dict()
     screened = {}
     for s in ident.screening:
+        edge = s.at_grid_edge()
         for n, r in s.ranges().items():
-            screened[n] = {"best": s.best[n], "range_lowest_1pct": list(r)}
+            screened[n] = {"best": s.best[n], "range_lowest_1pct": list(r),
+                           "best_at_grid_edge": edge[n]}
     for n, entry in post["parameters"].items():
         entry["screening"] = screened.get(n)
         entry["paper_table5"] = _paper_value(n)
@@ -93,21 +97,25 @@ def table5_lines(idents: Mapping[str, Identification]) -> list[str]:
             paper = _e(e["paper_table5"]) if e["paper_table5"] else "-"
             sc = e["screening"]
             sb = _e(sc["best"]) if sc else "-"
+            if sc and sc["best_at_grid_edge"]:
+                sb += f" (grid's {sc['best_at_grid_edge']} edge: the minimum may lie beyond)"
             sr = f"{_e(sc['range_lowest_1pct'][0])} - {_e(sc['range_lowest_1pct'][1])}" \
                 if sc else "-"
             lines.append(f"| {n} | {par} | {paper} | {sb} | {sr} | {_e(e['best'])} | "
                          f"{_e(e['median'])} | {_e(e['interval_90'][0])} - "
                          f"{_e(e['interval_90'][1])} |")
-    lines += ["", fidelity_statement(next(iter(idents.values())).settings)]
+    first = next(iter(idents.values()))
+    lines += ["", fidelity_statement(first.settings, fillers_of(first))]
     for ident in idents.values():
         lines += [""] + error_budget_lines(ident)
     return lines
 
 
-def fidelity_statement(settings) -> str:
-    """What the intervals hold for: the RVE they were computed on, and what they leave out."""
+def fidelity_statement(settings, fillers=None) -> str:
+    """What the intervals hold for: the RVE they were computed on, and what they leave out
+    (``fillers``: those the box cut is given for, default all)."""
     s = settings
-    cut = box_cut_phrase(s)
+    cut = box_cut_phrase(s, fillers)
     fa = s.faithful
     if fa is not None:
         boxes = ", ".join(f"{f} {b:g} um" for f, b in fa.boxes_um)
@@ -179,13 +187,19 @@ def lofo_lines(lofo: Mapping[str, list[dict]]) -> list[str]:
                           f"{r['interval_90'][1]:.3f}]", f"{r['error_pct']:+.1f}"]
         lines.append("| " + " | ".join(cells) + " |")
     lines.append("")
+    # the paper's predictions against the same measured means as Table 6 above
+    table6 = paper_data.paper_validation()
+    paper = [abs(table6[r["formulation"]][1] / r["measured"] - 1) * 100
+             for r in first.values() if r["formulation"] in table6 and "measured" in r]
     for p, rows in lofo.items():
         e = [abs(r["error_pct"]) for r in rows if "error_pct" in r]
         inside = sum(r["inside"] for r in rows if "inside" in r)
         if e:
             lines.append(f"- {p}: mean |error| {np.mean(e):.1f} %, max {np.max(e):.1f} %; "
                          f"measured mean inside the 90 % predictive interval for {inside} of "
-                         f"{len(e)} (the paper, not held out: mean 4.7 %, max 9.9 %)")
+                         f"{len(e)}" + (f" (the paper's predictions, not held out, against "
+                                        f"the same means: mean {np.mean(paper):.1f} %, max "
+                                        f"{np.max(paper):.1f} %)" if paper else ""))
     return lines
 
 
@@ -197,8 +211,8 @@ def identifiability_lines(idents: Mapping[str, Identification]) -> list[str]:
         prior = ident.posterior.prior
         for n in names:
             lo, hi = ident.posterior.interval(n)
-            if hi >= prior[1] / 1.5 or lo <= prior[0] * 1.5:
-                end = "upper" if hi >= prior[1] / 1.5 else "lower"
+            if hi >= prior[1] / EDGE_FACTOR or lo <= prior[0] * EDGE_FACTOR:
+                end = "upper" if hi >= prior[1] / EDGE_FACTOR else "lower"
                 lines.append(f"- **{par}, {n}**: the 90 % interval reaches the prior's {end} "
                              f"end ({prior[0]:g} - {prior[1]:g} m^2 K/W): the data bound it "
                              "from one side only.")
@@ -236,18 +250,26 @@ def selection_lines(idents: Mapping[str, Identification]) -> list[str]:
     return lines
 
 
-def box_cut(settings) -> dict[str, float]:
-    """Volume fraction of each filler's Table 1 distribution above the largest diameter."""
+def box_cut(settings, fillers=None) -> dict[str, float]:
+    """Volume fraction of each filler's Table 1 distribution above the largest diameter
+    (``fillers``: those to give, default all of Table 1)."""
     from itr_fv.psd import LogNormalPSD
 
     d_max = settings.max_diameter_box_ratio * settings.box_um
     return {f: LogNormalPSD(p.mu, p.sigma, settings.psd_basis).to_number()
-            .mass_outside(0.0, d_max, k=3.0)[1] for f, p in paper_data.TABLE1.items()}
+            .mass_outside(0.0, d_max, k=3.0)[1] for f, p in paper_data.TABLE1.items()
+            if fillers is None or f in fillers}
 
 
-def box_cut_phrase(settings) -> str:
+def fillers_of(ident: Identification) -> set[str]:
+    """The fillers of an identification's formulations."""
+    return {f for m in ident.models.values() for f in m.fractions}
+
+
+def box_cut_phrase(settings, fillers=None) -> str:
     """:func:`box_cut` as words: ``"20 % of the Al2O3 volume, 85 % of the AlN volume"``."""
-    return ", ".join(f"{100 * v:.0f} % of the {f} volume" for f, v in box_cut(settings).items())
+    return ", ".join(f"{100 * v:.0f} % of the {f} volume"
+                     for f, v in box_cut(settings, fillers).items())
 
 
 def conductivities_used(ident: Identification) -> str:
@@ -265,10 +287,12 @@ def settings_lines(idents: Mapping[str, Identification], extra: Mapping[str, obj
     lines = [f"- RVE: {s.box_um:g} um box, {s.voxel_um:g} um voxels ({s.n}^3), "
              f"{s.replicas} replicas per formulation, packing seeds from {s.seed} "
              f"(seeds used: " + ", ".join(
-                 f"{f} {m.seeds}" for f, m in ident.models.items()) + ")",
+                 f"{f} {m.seeds}" for f, m in ident.models.items()) + "; replica r packs "
+             f"with seed {s.seed} + r, and a packing that fails to reach its fraction is "
+             f"replaced by seed + r + {SEED_STRIDE}, + {2 * SEED_STRIDE}, ...)",
              f"- largest particle diameter {s.max_diameter_box_ratio:g} x box "
              f"({s.max_diameter_box_ratio * s.box_um:.1f} um): the cut removes "
-             + box_cut_phrase(s)
+             + box_cut_phrase(s, fillers_of(ident))
              + " of Table 1's distributions (replaced by smaller particles); conductivities "
              + conductivities_used(ident),
              f"- stated inputs: silicone film between touching particles "
@@ -329,10 +353,10 @@ def difference_lines(idents: Mapping[str, Identification]) -> list[str]:
                 continue
             lo, hi = ident.posterior.interval(n)
             remarks = []
-            if hi >= prior[1] / 1.5:
+            if hi >= prior[1] / EDGE_FACTOR:
                 remarks.append("interval reaches the prior's upper end: the data bound it "
                                "only from below")
-            if lo <= prior[0] * 1.5:
+            if lo <= prior[0] * EDGE_FACTOR:
                 remarks.append("interval reaches the prior's lower end")
             kind = parse_parameter(n)[0]
             if kind == "Rff":
@@ -342,7 +366,8 @@ def difference_lines(idents: Mapping[str, Identification]) -> list[str]:
             remarks.append("reasons " + ", ".join(str(r) for r in reasons) + " below")
             lines.append(f"| {n} | {par} | {ident.posterior.best[n] / paper:.2g} | "
                          f"{'yes' if lo <= paper <= hi else 'no'} | {'; '.join(remarks)} |")
-    s = next(iter(idents.values())).settings
+    first = next(iter(idents.values()))
+    s = first.settings
     lines += ["", "Reasons for the differences (numbered in the remarks):", "",
               f"1. Voxel: {s.voxel_um:g} um against the paper's 0.1 um. Under the per-area "
               "model the faces two touching voxelized spheres share grow with the voxel, so a "
@@ -352,7 +377,7 @@ def difference_lines(idents: Mapping[str, Identification]) -> list[str]:
               "(`validation/results/resolution.md`), which the identified resistances absorb.",
               f"2. Box: {s.box_um:g} um against 40 um. The largest particle is "
               f"{s.max_diameter_box_ratio * s.box_um:.1f} um, which removes "
-              + box_cut_phrase(s)
+              + box_cut_phrase(s, fillers_of(first))
               + " of Table 1; the smaller replacements add interface area per volume.",
               "3. Identifiability: under the per-area model a higher particle-matrix "
               "resistance is traded for a lower contact resistance along a ridge of the "

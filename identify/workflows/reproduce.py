@@ -30,6 +30,7 @@ from ..inference.measurements import Measurements, read_measurements
 from ..inference.pipeline import Identification, identify
 from ..inference.validate import leave_one_out, validate
 from ..reporting import figures, report
+from ..reporting.headline import headline, headline_lines, headline_markdown
 
 __all__ = ["ReproduceSettings", "run_reproduce", "run_identify", "write_solves"]
 
@@ -129,7 +130,9 @@ def _identify_all(meas: Measurements, settings: ReproduceSettings, progress: boo
         idents[par] = identify(meas, par, settings=settings.forward,
                                grid_points=settings.grid_points, seed=settings.seed,
                                progress=False, echo=echo, engine=engine)
-        best = ", ".join(f"{n} {v:.2e}" for n, v in idents[par].posterior.best.items())
+        post = idents[par].posterior
+        best = ", ".join(f"{n} {v:.2e} (90 % {post.interval(n)[0]:.2e} - "
+                         f"{post.interval(n)[1]:.2e})" for n, v in post.best.items())
         echo(f"{par}: identified {best} (m^2 K/W)")
     return idents
 
@@ -156,6 +159,8 @@ def _reproduce(settings: ReproduceSettings, out: Path, progress: bool,
     validation, lofo = {}, {}
     n_val = sum(len(i.models) for i in idents.values()) * settings.forward.replicas
     t = time.perf_counter()
+    echo(f"validation: full solves of {settings.forward.replicas} RVEs x 3 directions per "
+         "formulation at the identified values")
     with _bar(n_val, "validation solves", progress) as bar:
         for par, ident in idents.items():
             validation[par] = validate(ident.models, ident.posterior.best, meas,
@@ -163,15 +168,22 @@ def _reproduce(settings: ReproduceSettings, out: Path, progress: bool,
     t_val = time.perf_counter() - t
     t = time.perf_counter()
     if settings.leave_one_out:
-        for par, ident in idents.items():
-            lofo[par] = leave_one_out(ident.models, meas, grid_points=settings.grid_points,
-                                      seed=settings.seed)
+        echo("leave one formulation out: each held out, the rest calibrated, the held-out "
+             "one predicted")
+        n_lofo = sum(len(i.models) for i in idents.values())
+        with _bar(n_lofo, "leave-one-out", progress) as bar:
+            bar.unit = "formulation"
+            for par, ident in idents.items():
+                lofo[par] = leave_one_out(ident.models, meas, grid_points=settings.grid_points,
+                                          seed=settings.seed, tick=lambda: bar.update(1))
     t_lofo = time.perf_counter() - t
     echo("figures and fields")
     files, psd_fits = _figures(idents, validation, out)
     files.append(write_solves(list(idents.values()), out / "full_solves.parquet"))
-    data = {p: {**report.identified_dict(i), "validation": validation[p],
-                "leave_one_out": lofo.get(p, [])} for p, i in idents.items()}
+    head = headline(idents)
+    data = {"headline": head}
+    data.update({p: {**report.identified_dict(i), "validation": validation[p],
+                     "leave_one_out": lofo.get(p, [])} for p, i in idents.items()})
     data["selection"] = report.selection(idents)
     data["psd_fit"] = psd_fits
     files.append(write_text(out / "identified.json", json.dumps(data, indent=2) + "\n"))
@@ -180,11 +192,13 @@ def _reproduce(settings: ReproduceSettings, out: Path, progress: bool,
               "validation full solves": t_val, "leave-one-formulation-out": t_lofo,
               "total (before the report)": wall}
     files.append(write_text(out / "report.md", _reproduce_markdown(
-        idents, meas, validation, lofo, psd_fits, timing, settings)))
+        head, idents, meas, validation, lofo, psd_fits, timing, settings)))
     files.append(write_manifest(out, files, {"job": "reproduce", **settings.to_dict(),
                                              "wall_s": round(wall, 1),
                                              "engine": engine.summary()}))
     echo(f"engine: {engine.summary()}")
+    for line in headline_lines(head):
+        echo(line)
     echo(f"reproduce: done in {wall:.0f} s; wrote {len(files)} files to {out}")
     return files
 
@@ -207,7 +221,8 @@ def _figures(idents: dict[str, Identification], validation: dict, out: Path
     return files, fits
 
 
-def _reproduce_markdown(idents, meas, validation, lofo, psd_fits, timing, settings) -> str:
+def _reproduce_markdown(head, idents, meas, validation, lofo, psd_fits, timing,
+                        settings) -> str:
     from itr_fv import paper_data
 
     table1 = paper_data.psd_lognormal()
@@ -215,7 +230,9 @@ def _reproduce_markdown(idents, meas, validation, lofo, psd_fits, timing, settin
              "Interfacial thermal resistances of Al2O3/AlN-silicone composites identified "
              "from the shipped measurements (the paper's Table 3) with certified "
              "reduced-basis surrogates of full voxel solves, validated with the full solver.",
-             "", "## Settings", ""]
+             ""]
+    lines += headline_markdown(head)
+    lines += ["", "## Settings", ""]
     lines += report.settings_lines(idents, {"wall time (s)": ", ".join(
         f"{k} {v:.0f}" for k, v in timing.items())})
     lines += ["", "## Table 1: size distributions (packed RVEs against the paper)", "",
@@ -273,13 +290,16 @@ def run_identify(meas: Measurements, settings: ReproduceSettings, out: Path, *,
 def _identify_report(meas: Measurements, settings: ReproduceSettings, out: Path,
                      idents: dict[str, Identification], t0: float,
                      echo: Callable[[str], None]) -> list[Path]:
-    data = {p: report.identified_dict(i) for p, i in idents.items()}
+    head = headline(idents)
+    data = {"headline": head}
+    data.update({p: report.identified_dict(i) for p, i in idents.items()})
     if len(idents) > 1:
         data["selection"] = report.selection(idents)
     files = [write_text(out / "identified.json", json.dumps(data, indent=2) + "\n")]
     for par, ident in idents.items():
         files.append(figures.posterior_figure(ident, out / f"posterior_{par}.png"))
-    lines = [f"# Identified interface resistances: {meas.source}", "", "## Settings", ""]
+    lines = [f"# Identified interface resistances: {meas.source}", ""]
+    lines += headline_markdown(head) + ["", "## Settings", ""]
     lines += report.settings_lines(idents, {"wall time (s)": f"{time.perf_counter() - t0:.0f}"})
     lines += ["", "## Measurements", ""] + report.table3_lines(meas)
     lines += ["", "## Identified (m^2 K/W)", ""] + report.table5_lines(idents)
@@ -289,6 +309,8 @@ def _identify_report(meas: Measurements, settings: ReproduceSettings, out: Path,
     files.append(write_text(out / "report.md", "\n".join(lines) + "\n"))
     files.append(write_manifest(out, files, {"job": "identify", "measurements": meas.source,
                                              **settings.to_dict()}))
+    for line in headline_lines(head):
+        echo(line)
     echo(f"identify: done in {time.perf_counter() - t0:.0f} s; wrote {out / 'identified.json'}")
     return files
 

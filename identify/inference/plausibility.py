@@ -1,0 +1,98 @@
+"""Physical sense of a measurement, checked while it is read (before any solve).
+
+A measured conductivity of a formulation can only lie below the Hashin-Shtrikman upper
+bound of its phases at perfect interfaces: an interface resistance only lowers the effective
+conductivity, so no resistance reaches above it (a value there is usually in mW/(m K)). A
+value below the matrix's own conductivity is reachable only with resistances that make the
+filler nearly insulating: it is warned about, not refused. A sample is 0.01 - 20 mm thick
+(thermal interface materials and their tester samples); a thickness outside that range is
+usually in um or m under a ``_mm`` column.
+
+The phase conductivities are the paper's (:data:`itr_fv.paper_data.PAPER_CONDUCTIVITY`),
+the ones the identification solves with.
+"""
+
+from __future__ import annotations
+
+import warnings
+
+from itr_fv import paper_data
+from itr_fv.analytic import hashin_shtrikman_multiphase
+
+from .formulations import fractions_of
+
+__all__ = ["ImplausibleMeasurementWarning", "conductivity_range", "check_conductivity",
+           "check_thickness", "THICKNESS_RANGE_MM"]
+
+class ImplausibleMeasurementWarning(UserWarning):
+    """A measured value that physics allows but that is more likely a wrong unit."""
+
+
+#: Plausible sample thickness, mm: a thermal interface material's tester sample.
+THICKNESS_RANGE_MM = (0.01, 20.0)
+
+
+def conductivity_range(formulation: str) -> tuple[float, float] | None:
+    """``(k_matrix, k_upper)`` in W/(m K) for ``formulation``: the matrix conductivity and
+    the Hashin-Shtrikman upper bound at perfect interfaces; None for a name that gives no
+    composition (a caller's own formulation set)."""
+    try:
+        fillers = fractions_of(formulation)
+    except ValueError:
+        return None
+    k = paper_data.PAPER_CONDUCTIVITY
+    matrix = paper_data.PAPER_SYSTEM.matrix
+    fractions = [1.0 - sum(fillers.values()), *fillers.values()]
+    conductivities = [k[matrix], *(k[f] for f in fillers)]
+    return k[matrix], hashin_shtrikman_multiphase(fractions, conductivities)[1]
+
+
+def check_conductivity(where: str, formulation: str, k_W_per_mK: float, *,
+                       column: str = "k_W_per_mK") -> None:
+    """Refuse a conductivity above what any resistance allows; warn below the matrix's.
+
+    Parameters
+    ----------
+    where : str
+        ``"<file> line <n>"``, the start of the message.
+    formulation : str
+        Its formulation name.
+    k_W_per_mK : float
+        The measured (or reduced) conductivity, W/(m K).
+    column : str
+        The column it came from, named in the message.
+
+    Raises
+    ------
+    ValueError
+        Above the Hashin-Shtrikman bound of the formulation at perfect interfaces.
+
+    Warns
+    -----
+    ImplausibleMeasurementWarning
+        Below the matrix conductivity.
+    """
+    span = conductivity_range(formulation)
+    if span is None:
+        return
+    k_matrix, k_upper = span
+    if k_W_per_mK > k_upper:
+        raise ValueError(f"{where}: {column} {k_W_per_mK:g} W/(m K) is above "
+                         f"{k_upper:.3g} W/(m K), the most {formulation} can conduct at any "
+                         "interface resistance (Hashin-Shtrikman bound at perfect interfaces); "
+                         "is it in mW/(m K)?")
+    if k_W_per_mK < k_matrix:
+        warnings.warn(f"{where}: {column} {k_W_per_mK:g} W/(m K) of {formulation} is below the "
+                      f"matrix's own {k_matrix:g} W/(m K): only resistances that make the "
+                      "filler nearly insulating reach it; check the unit",
+                      ImplausibleMeasurementWarning, stacklevel=3)
+
+
+def check_thickness(where: str, thickness_mm: float, *, column: str = "thickness_mm") -> None:
+    """Refuse a sample thickness outside :data:`THICKNESS_RANGE_MM` (``where`` as in
+    :func:`check_conductivity`)."""
+    lo, hi = THICKNESS_RANGE_MM
+    if not lo <= thickness_mm <= hi:
+        hint = "in um" if thickness_mm > hi else "in m"
+        raise ValueError(f"{where}: {column} {thickness_mm:g} mm is outside the {lo:g} - "
+                         f"{hi:g} mm of a thermal-interface sample; is it {hint}?")
