@@ -50,7 +50,7 @@ def test_identify_writes_identified_json(tmp_path, capsys):
 @pytest.mark.parametrize("text, expected", [
     ("formulation,replicate\nAl2O3-55,1\n", "k_W_per_mK"),
     ("formulation,replicate,k_W_per_mK\nAl2O3-55,1,-1.2\nAl2O3-55,2,1.3\n", "line 2"),
-    ("formulation,replicate,k_W_per_mK\nSiC-50,1,1.2\nSiC-50,2,1.3\n", "unknown formulation"),
+    ("formulation,replicate,k_W_per_mK\nSiC-50,1,1.2\nSiC-50,2,1.3\n", "formulation 'SiC-50': expected a Table 2 name"),
     ("formulation,replicate,k_W_per_mK\nAl2O3-55,1,1.2\n", "replicate"),
     ("formulation,replicate,k_W_per_mK\nAl2O3-55,1,nan\nAl2O3-55,2,1.3\n", "k_W_per_mK"),
 ])
@@ -95,6 +95,14 @@ def test_reproduce_end_to_end_at_tiny_size(tmp_path):
             assert p["interval_90"][0] <= p["best"] * 1.2 and p["unit"] == "m^2 K/W"
     assert set(data["gap"]["parameters"]) == {"R_Al2O3_silicone", "R_AlN_silicone"}
     assert "Rff_Al2O3_AlN" in data["area"]["parameters"]
+    head = data["headline"]
+    assert head["quote"] in ("area", "gap")
+    for par in ("area", "gap"):
+        for name, e in head["parameters"][par].items():
+            assert e["interval_90"] == data[par]["parameters"][name]["interval_90"]
+            assert e["flag"] in FLAGS
+    # a per-area contact value is never quoted as plainly determined
+    assert head["parameters"]["area"]["Rff_Al2O3_AlN"]["flag"] != "determined"
     for par in ("area", "gap"):
         # the four hybrids are held at one point of the single-filler posterior, inside
         # its 90 % intervals, and carry a spread over that posterior

@@ -148,7 +148,7 @@ def _check_formulation(path: Path, line: int, name: str, known) -> None:
         try:
             known(name)
         except ValueError as exc:
-            raise ValueError(f"{path.name} line {line}: unknown formulation: {exc}") from None
+            raise ValueError(f"{path.name} line {line}: {exc}") from None
     elif known is not None and name not in known:
         raise ValueError(f"{path.name} line {line}: unknown formulation {name!r} (known: "
                          f"{', '.join(sorted(known))})")
