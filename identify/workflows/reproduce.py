@@ -71,9 +71,9 @@ class ReproduceSettings:
         return d
 
 
-def _bar(total: int, desc: str, progress: bool):
+def _bar(total: int, desc: str, progress: bool, unit: str = "solve"):
     from tqdm.auto import tqdm
-    return tqdm(total=total, desc=desc, unit="solve", disable=not progress)
+    return tqdm(total=total, desc=desc, unit=unit, disable=not progress)
 
 
 def write_solves(idents: Sequence[Identification], path: Path) -> Path:
@@ -171,8 +171,7 @@ def _reproduce(settings: ReproduceSettings, out: Path, progress: bool,
         echo("leave one formulation out: each held out, the rest calibrated, the held-out "
              "one predicted")
         n_lofo = sum(len(i.models) for i in idents.values())
-        with _bar(n_lofo, "leave-one-out", progress) as bar:
-            bar.unit = "formulation"
+        with _bar(n_lofo, "leave-one-out", progress, unit="formulation") as bar:
             for par, ident in idents.items():
                 lofo[par] = leave_one_out(ident.models, meas, grid_points=settings.grid_points,
                                           seed=settings.seed, tick=lambda: bar.update(1))
