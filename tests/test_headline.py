@@ -56,3 +56,22 @@ def test_the_better_fit_is_not_quoted_when_it_leaves_a_resistance_undetermined()
     flags["area"]["R_Al2O3_silicone"] = "undetermined"
     par, why = choose_parametrisation({"area": 100.0, "gap": 138.0}, flags)
     assert par == "area" and "quote the intervals" in why
+
+
+def test_uncorrected_numerical_effects_beyond_the_interval_are_a_caveat():
+    from itr_identify.reporting.headline import _caveat
+
+    entry = {"interval_half_width_factor": 2.09,
+             "factors": {"voxel bias (not corrected)": 1.50,
+                         "box effect beyond the box solved": 2.94, "film 5 nm": 0.59}}
+    out = _caveat(entry)
+    assert out["numerical_factor"] == pytest.approx(1.50 * 2.94)
+    assert "x4.41" in out["caveat"] and "x/2.09" in out["caveat"]
+    # inside the interval: the factor is given, no caveat
+    entry["factors"] = {"voxel bias (not corrected)": 1.1,
+                        "box effect beyond the box solved": 1.2}
+    out = _caveat(entry)
+    assert out["numerical_factor"] == pytest.approx(1.32) and "caveat" not in out
+    # a corrected model (no uncorrected voxel bias) with an unknown box effect: nothing
+    assert _caveat({"interval_half_width_factor": 1.3,
+                    "factors": {"box effect beyond the box solved": None}}) == {}

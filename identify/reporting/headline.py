@@ -14,6 +14,11 @@ Flags (one per parameter, the first that applies):
 - ``voxel-specific``: a per-area contact resistance (``Rff``): determined, but a property
   of the voxel it was identified at (``validation/results/resolution_area.md``);
 - ``determined``: none of these.
+
+Beside the flag, the combined factor of the error budget's effects that this fidelity
+leaves uncorrected (voxel bias, box beyond the box solved) and a caveat where it is larger
+than the interval: a value can be determined at its fidelity and still move by more than its
+interval at a faithful one.
 """
 
 from __future__ import annotations
@@ -25,6 +30,7 @@ from itr_fv.parameters import parse_parameter
 
 from ..forward.fidelity import fidelity_name
 from ..inference.pipeline import Identification
+from .error_budget import error_budget
 
 __all__ = ["parameter_flag", "choose_parametrisation", "headline", "headline_lines",
            "headline_markdown", "EDGE_FACTOR",
@@ -34,6 +40,9 @@ __all__ = ["parameter_flag", "choose_parametrisation", "headline", "headline_lin
 EDGE_FACTOR = 1.5
 #: A 90 % interval wider than this many decades determines nothing worth quoting.
 UNDETERMINED_DECADES = 2.0
+#: The error budget's effects that the RVE leaves out of the likelihood and that a higher
+#: fidelity removes: their combined factor on a resistance is set against its interval.
+UNCORRECTED = ("voxel bias (not corrected)", "box effect beyond the box solved")
 FLAGS = ("at the prior's edge", "undetermined", "bounded on one side", "voxel-specific",
          "determined")
 
@@ -95,6 +104,24 @@ def choose_parametrisation(bics: Mapping[str, float], flags: Mapping[str, Mappin
                   "filler-matrix resistance: quote the intervals, not the best values")
 
 
+def _caveat(budget_entry: dict) -> dict:
+    """``numerical_factor`` (the combined factor of the :data:`UNCORRECTED` effects on the
+    resistance, > 1 means the resistance would be higher) and a ``caveat`` when it exceeds
+    the 90 % interval's half-width factor."""
+    factors = [budget_entry["factors"].get(k) for k in UNCORRECTED]
+    factors = [f for f in factors if f is not None and f > 0]
+    if not factors:
+        return {}
+    c = math.prod(factors)
+    width = budget_entry["interval_half_width_factor"]
+    out = {"numerical_factor": c}
+    if max(c, 1 / c) > width:
+        out["caveat"] = (f"the RVE's uncorrected voxel and box effects move it by x{c:.2f}, "
+                         f"more than its interval (x/{width:.2f}): quote it from a higher "
+                         "--fidelity")
+    return out
+
+
 def headline(idents: Mapping[str, Identification]) -> dict:
     """The headline as plain JSON: ``quote`` (parametrisation), ``why``, ``fidelity`` and
     per parametrisation and parameter ``best``, ``interval_90`` (m^2 K/W) and ``flag``."""
@@ -104,6 +131,10 @@ def headline(idents: Mapping[str, Identification]) -> dict:
     params = {p: {n: {"best": i.posterior.best[n], "interval_90": list(i.posterior.interval(n)),
                       "flag": flags[p][n], "unit": "m^2 K/W"}
                   for n in i.posterior.names} for p, i in idents.items()}
+    for p, ident in idents.items():
+        for n, entry in error_budget(ident)["parameters"].items():
+            if n in params[p]:
+                params[p][n].update(_caveat(entry))
     s = next(iter(idents.values())).settings
     fidelity = fidelity_name(s.faithful)
     return {"quote": quote, "why": why, "fidelity": fidelity,
@@ -123,6 +154,8 @@ def headline_lines(head: dict) -> list[str]:
             lo, hi = e["interval_90"]
             lines.append(f"  {n} = {e['best']:.2e} m^2 K/W (90 % interval {lo:.2e} - "
                          f"{hi:.2e}; {e['flag']})")
+            if "caveat" in e:
+                lines.append(f"    caveat: {e['caveat']}")
     lines.append(f"quote {head['quote']}: {head['why']}.")
     lines.append(f"These hold at fidelity {head['fidelity']} ({head['holds_at']}); the "
                  "report's error budget gives what the RVE leaves out.")
@@ -132,14 +165,19 @@ def headline_lines(head: dict) -> list[str]:
 def headline_markdown(head: dict) -> list[str]:
     """:func:`headline` as the first section of ``report.md``."""
     lines = ["## Headline", "",
-             "| parametrisation | parameter | best (m^2 K/W) | 90 % interval | flag |",
-             "|---|---|---|---|---|"]
+             "| parametrisation | parameter | best (m^2 K/W) | 90 % interval | flag | "
+             "uncorrected voxel and box effects |",
+             "|---|---|---|---|---|---|"]
     for par, params in head["parameters"].items():
         name = f"**{par}** (quote)" if par == head["quote"] else par
         for n, e in params.items():
             lo, hi = e["interval_90"]
+            c = e.get("numerical_factor")
+            effect = "-" if c is None else f"x{c:.2f}" + (
+                ", beyond the interval: quote it from a higher --fidelity" if "caveat" in e
+                else "")
             lines.append(f"| {name} | {n} | {e['best']:.2e} | {lo:.2e} - {hi:.2e} | "
-                         f"{e['flag']} |")
+                         f"{e['flag']} | {effect} |")
     lines += ["", f"Quote **{head['quote']}**: {head['why']}. These values hold at fidelity "
               f"`{head['fidelity']}` ({head['holds_at']}); the error budget below gives what "
               "the RVE leaves out. Flags: determined; bounded on one side (the interval "
