@@ -240,3 +240,28 @@ def test_the_whole_library_names_three_effects():
     d = find_discrepancy(measure(thickness=True), settings=SETTINGS, tables=tables)
     assert d.verdict == "none", d.statement
     assert np.isfinite(d.base.chi_square)
+
+
+def test_a_likelihood_ratio_interval_holds_its_maximum_also_at_an_edge():
+    from itr_identify.discrepancy.fit import LR_DROP_90, profile_interval
+
+    axis = np.linspace(0.8, 1.0, 41)
+    # a parabola peaking at 0.95 with curvature giving a half-width of 0.03 at the cut
+    prof = -LR_DROP_90 * ((axis - 0.95) / 0.03) ** 2
+    lo, hi = profile_interval(prof, axis)
+    assert lo == pytest.approx(0.92, abs=2e-4) and hi == pytest.approx(0.98, abs=2e-4)
+    # a maximum on the end of the axis (the filler factor at nominal 1.0): inside
+    prof = -LR_DROP_90 * ((axis - 1.0) / 0.05) ** 2
+    lo, hi = profile_interval(prof, axis)
+    assert hi == 1.0 and lo == pytest.approx(0.95, abs=2e-4)
+
+
+def test_every_reported_interval_contains_its_best_value(tables):
+    for value, kw in ((None, {}), (0.30, {"effect": fx.MatrixConductivity()})):
+        d = find_discrepancy(measure(value=value, **kw), settings=SETTINGS, tables=tables)
+        for m in d.candidates:
+            if m.interval is None:
+                continue
+            (param,) = set(m.parameters) - {"R_Al2O3_silicone", "R_AlN_silicone"}
+            lo, hi = m.interval
+            assert lo <= m.parameters[param] <= hi, (m.name, m.parameters, m.interval)

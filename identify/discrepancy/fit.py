@@ -12,13 +12,12 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.interpolate import RegularGridInterpolator
-from scipy.special import logsumexp
 
 from ..inference.measurements import Measurements
 from .effects import Effect
 from .tables import ForwardTables, resistance_name
 
-__all__ = ["Group", "groups_of", "ModelFit", "fit_model"]
+__all__ = ["Group", "groups_of", "ModelFit", "fit_model", "profile_interval"]
 
 
 @dataclass(frozen=True)
@@ -93,7 +92,8 @@ class ModelFit:
     parameters : dict
         Best values: ``R_<f>_silicone`` (m^2 K/W) and the effect's parameter.
     interval : tuple of float or None
-        90 % credible interval of the effect's parameter.
+        90 % likelihood-ratio interval of the effect's parameter (profiled over the
+        resistances; :func:`profile_interval`): it contains the best value.
     predicted : ndarray
         Model value per group at the best parameters, W/(m K).
     variance : ndarray
@@ -181,6 +181,46 @@ def _gaussian_shared(means: Sequence[float], ks: Sequence[np.ndarray],
     return -0.5 * (quad + logd + np.log1p(scc)), quad
 
 
+#: Half the 90 % quantile of chi-square with one degree of freedom: the drop of the profile
+#: log-likelihood that bounds a 90 % likelihood-ratio interval.
+LR_DROP_90 = 0.5 * 2.705543454095404
+
+
+def profile_interval(profile: np.ndarray, axis: np.ndarray, drop: float = LR_DROP_90
+                     ) -> tuple[float, float]:
+    """90 % likelihood-ratio interval of a parameter from its profile log-likelihood.
+
+    The values whose profile lies within ``drop`` of the maximum, from the outermost such
+    grid points, with linear interpolation to the crossing where the profile falls below
+    the cut between two grid points; an end of the axis bounds the interval where the
+    profile is still above the cut there. The maximum, the reported best value, is inside
+    by construction (a credible interval from the marginal posterior need not contain the
+    profile's maximum: 1.0 outside [0.931, 0.996] was seen).
+
+    Parameters
+    ----------
+    profile : ndarray, shape (n,)
+        Profile log-likelihood on ``axis``.
+    axis : ndarray, shape (n,)
+        The parameter's values, increasing.
+    drop : float
+        Log-likelihood drop that bounds the interval (default: 90 %, one parameter).
+    """
+    profile = np.asarray(profile, dtype=float)
+    axis = np.asarray(axis, dtype=float)
+    cut = float(profile.max()) - drop
+    inside = np.flatnonzero(profile >= cut)
+    a, b = int(inside[0]), int(inside[-1])
+
+    def crossing(out: int, inn: int) -> float:
+        f = (cut - profile[out]) / (profile[inn] - profile[out])
+        return float(axis[out] + f * (axis[inn] - axis[out]))
+
+    lo = float(axis[a]) if a == 0 else crossing(a - 1, a)
+    hi = float(axis[b]) if b == axis.size - 1 else crossing(b + 1, b)
+    return lo, hi
+
+
 def fit_model(tables: ForwardTables, groups: Sequence[Group], effect: Effect | None
               ) -> ModelFit:
     """Calibrate the base model (``effect=None``) or base + ``effect`` on the groups."""
@@ -226,11 +266,7 @@ def fit_model(tables: ForwardTables, groups: Sequence[Group], effect: Effect | N
     edge = any(best_i[fl] in (0, fine_r.size - 1) for fl in fillers)
     if effect is not None:
         params[effect.parameter] = float(fine_t[j])
-        # marginal posterior of the effect parameter (uniform on its axis, R log-uniform)
-        lm = sum(logsumexp(ll[fl], axis=0) for fl in fillers)
-        w = np.exp(lm - lm.max())
-        c = np.cumsum(w) / w.sum()
-        interval = (float(np.interp(0.05, c, fine_t)), float(np.interp(0.95, c, fine_t)))
+        interval = profile_interval(profile, fine_t)
     lmax = float(profile[j])
     p = len(fillers) + (effect is not None)
     index = {id(g): i for i, g in enumerate(groups)}
