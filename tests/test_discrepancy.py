@@ -265,3 +265,26 @@ def test_every_reported_interval_contains_its_best_value(tables):
             (param,) = set(m.parameters) - {"R_Al2O3_silicone", "R_AlN_silicone"}
             lo, hi = m.interval
             assert lo <= m.parameters[param] <= hi, (m.name, m.parameters, m.interval)
+
+
+def test_implausible_resistances_and_grid_ends_are_reported():
+    from itr_identify.discrepancy.decision import resistance_remarks
+    from itr_identify.discrepancy.fit import ModelFit
+
+    def fit(**r):
+        return ModelFit("base", dict(r), None, np.zeros(1), np.ones(1), 0.0, 0.0, 0.0, 2)
+
+    # a jump like the tester's 46 % effect: 13-20x the generating values
+    remarks = resistance_remarks(fit(R_Al2O3_silicone=2.9e-7, R_AlN_silicone=6.0e-7),
+                                 SETTINGS)
+    assert remarks == [
+        "R_Al2O3_silicone = 2.9e-07 m^2 K/W (outside the physical range 1e-09 - 1e-07 "
+        "m^2 K/W; 13x the paper's 2.2e-08)",
+        "R_AlN_silicone = 6e-07 m^2 K/W (outside the physical range 1e-09 - 1e-07 m^2 K/W; "
+        "20x the paper's 3e-08)"]
+    # the grid's lower end (the base model at its most conductive)
+    (edge,) = resistance_remarks(fit(R_Al2O3_silicone=1e-9, R_AlN_silicone=2e-8), SETTINGS)
+    assert edge.startswith("R_Al2O3_silicone = 1e-09 m^2 K/W (at the lower end of the "
+                           "solved grid; 0.045x the paper's 2.2e-08)")
+    # plausible values: nothing to say
+    assert resistance_remarks(fit(R_Al2O3_silicone=2e-8, R_AlN_silicone=3e-8), SETTINGS) == []

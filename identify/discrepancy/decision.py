@@ -17,7 +17,7 @@ from .fit import Group, ModelFit, fit_model, groups_of
 from .settings import DiscrepancySettings
 from .tables import ForwardTables, build_tables
 
-__all__ = ["Discrepancy", "find_discrepancy", "residual_structure"]
+__all__ = ["Discrepancy", "find_discrepancy", "residual_structure", "resistance_remarks"]
 
 
 @dataclass
@@ -161,12 +161,49 @@ def find_discrepancy(measurements: Measurements, *,
     return out
 
 
+def resistance_remarks(fit: ModelFit, st: DiscrepancySettings) -> list[str]:
+    """Remarks on the fitted filler-silicone resistances of ``fit``: at an end of the
+    solved grid (the model cannot reach the data inside it), outside the physical range
+    :attr:`DiscrepancySettings.physical_r_m2K_per_W`, or more than 5x from the paper's
+    Table 5 value."""
+    from itr_fv.paper_data import paper_parameters
+
+    paper = paper_parameters()
+    grid = st.r_grid_m2K_per_W
+    lo, hi = st.physical_r_m2K_per_W
+    out = []
+    for name, r in fit.parameters.items():
+        if not name.startswith("R_"):
+            continue
+        notes = []
+        if r <= grid[0] * (1 + 1e-9) or r >= grid[-1] * (1 - 1e-9):
+            notes.append(f"at the {'lower' if r <= grid[0] * (1 + 1e-9) else 'upper'} end "
+                         "of the solved grid")
+        if not lo <= r <= hi:
+            notes.append(f"outside the physical range {lo:g} - {hi:g} m^2 K/W")
+        ref = paper.get(name)
+        if ref and not 0.2 <= r / ref <= 5:
+            notes.append(f"{r / ref:.2g}x the paper's {ref:.2g}")
+        if notes:
+            out.append(f"{name} = {r:.2g} m^2 K/W ({'; '.join(notes)})")
+    return out
+
+
 def _decide(d: Discrepancy, st: DiscrepancySettings) -> None:
     n = len(d.groups)
     significant = d.p_value_base < st.significance
     base_line = (f"Base model: chi-square {d.base.chi_square:.1f} on {d.base.dof(n)} degrees "
                  f"of freedom (p = {d.p_value_base:.2g}): the residuals are "
                  f"{'significant' if significant else 'consistent with the noise'}.")
+    remarks = resistance_remarks(d.base, st)
+    if remarks:
+        base_line += " Its resistances: " + "; ".join(remarks) + "."
+    if d.base.at_grid_edge:
+        # the base model reaches the data only from the end of its range: a discrepancy in
+        # itself, whatever the chi-square says
+        base_line += (" A base fit at the end of the resistance grid is a discrepancy in "
+                      "itself: inside the grid the model cannot reach the measurements.")
+        significant = True
     supported = [m for m in d.candidates if d.base.bic - m.bic >= st.bic_margin]
     edge = [m.name for m in supported if m.at_grid_edge]
     supported = [m for m in supported if not m.at_grid_edge]
@@ -204,6 +241,9 @@ def _decide(d: Discrepancy, st: DiscrepancySettings) -> None:
              f"{d.base.bic - top.bic:.1f}, chi-square/dof {d.chi_square_per_dof(d.base):.2f} "
              f"-> {d.chi_square_per_dof(top):.2f}")
     d.winner = top
+    moved = resistance_remarks(top, st)
+    if moved:
+        named += "; its resistances: " + "; ".join(moved)
     if ties:
         d.verdict = "tie"
         others = "; ".join(f"{m.name} (BIC {m.bic - top.bic:+.1f})" for m in ties)

@@ -33,6 +33,11 @@ class DiscrepancySettings:
         BIC difference under which two candidates explain the data equally well.
     significance : float
         p-value of the chi-square test under which a residual is significant.
+    physical_r_m2K_per_W : (float, float)
+        The range a filler-silicone resistance is physically expected in, m^2 K/W (acoustic
+        and diffuse mismatch give 1e-9 to 1e-8 for clean oxide or nitride-polymer
+        interfaces; adsorbed layers and coupling agents up to about 1e-7): a fit outside it
+        is reported as an implausible resistance.
     """
 
     forward: ForwardSettings = field(default_factory=lambda: ForwardSettings(
@@ -43,6 +48,7 @@ class DiscrepancySettings:
     bic_margin: float = 6.0
     tie_margin: float = 2.0
     significance: float = 0.01
+    physical_r_m2K_per_W: tuple[float, float] = (1e-9, 1e-7)
 
     def __post_init__(self) -> None:
         r = np.asarray(self.r_grid_m2K_per_W, dtype=float)
@@ -55,6 +61,10 @@ class DiscrepancySettings:
         for name in ("bic_margin", "tie_margin"):
             if not getattr(self, name) >= 0:
                 raise ValueError(f"{name}: expected >= 0, got {getattr(self, name)!r}")
+        lo, hi = self.physical_r_m2K_per_W
+        if not 0 < lo < hi:
+            raise ValueError(f"physical_r_m2K_per_W: expected 0 < low < high m^2 K/W, got "
+                             f"{self.physical_r_m2K_per_W!r}")
         if not 0 < self.significance < 1:
             raise ValueError(f"significance: expected a p-value in (0, 1), got "
                              f"{self.significance!r}")
