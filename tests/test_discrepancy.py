@@ -197,9 +197,9 @@ def test_discrepancy_command_end_to_end(tmp_path, capsys):
     csv.write_text("formulation,replicate,k_W_per_mK\n" + "".join(
         f"{f},{i + 1},{k:.4f}\n" for f, v in meas.values.items() for i, k in enumerate(v)))
     out = tmp_path / "out"
-    assert main(["discrepancy", str(csv), "--out", str(out), "--effects", "matrix",
-                 "--box-um", "12", "--voxel-um", "0.5", "--replicas", "2", "--seed", "3",
-                 "--no-progress"]) == 0
+    flags = ["--effects", "matrix", "--box-um", "12", "--voxel-um", "0.5", "--replicas", "2",
+             "--seed", "3", "--no-progress", "--store", str(tmp_path / "shared")]
+    assert main(["discrepancy", str(csv), "--out", str(out), *flags]) == 0
     data = json.loads((out / "discrepancy.json").read_text())
     assert data["verdict"] == "named"
     best = data["candidates"][0]
@@ -211,6 +211,14 @@ def test_discrepancy_command_end_to_end(tmp_path, capsys):
     files = {f["path"] for f in json.loads((out / "manifest.json").read_text())["files"]}
     assert files >= {"discrepancy.md", "discrepancy.json", "discrepancy.png"}
     assert "discrepancy: named" in capsys.readouterr().out
+    # another table, another output folder, the same store: no full solve again
+    other = tmp_path / "other.csv"
+    other.write_text("formulation,replicate,k_W_per_mK\n" + "".join(
+        f"{f},{i + 1},{1.02 * k:.4f}\n" for f, v in meas.values.items()
+        for i, k in enumerate(v)))
+    assert main(["discrepancy", str(other), "--out", str(tmp_path / "out2"), *flags]) == 0
+    assert "engine: 0 full solves on this process" in capsys.readouterr().out
+    assert not (tmp_path / "out2" / "solves").exists()
 
 
 @pytest.mark.parametrize("args, expected", [

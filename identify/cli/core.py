@@ -191,19 +191,26 @@ def read_table(path: str | None, reader: Callable):
 
 
 def engine_arguments(p: argparse.ArgumentParser) -> None:
-    """--workers N and --scheduler ADDRESS: where the full solves run (read by
-    :func:`engine_options`)."""
+    """--workers N and --scheduler ADDRESS: where the full solves run; --store DIR: where
+    they are kept (read by :func:`engine_options`)."""
     p.add_argument("--workers", type=number(int, 1, 64, hi_open=False), default=None,
                    help="run the full solves on a local Dask cluster of N processes "
                    "(default: in this process, the fastest on 2 cores)")
     p.add_argument("--scheduler", default=None, metavar="ADDRESS",
                    help="run the full solves on a running Dask scheduler "
                    "(tcp://host:port)")
+    p.add_argument("--store", default=None, metavar="DIR",
+                   help="keep and reuse the full solves in DIR (default OUT/solves); runs "
+                   "that share a DIR share their solves, which do not depend on the "
+                   "measurements")
 
 
 def engine_options(args: argparse.Namespace) -> dict:
-    """``workers`` and ``scheduler`` of the solve engine from the command line."""
-    return {"workers": args.workers, "scheduler": args.scheduler}
+    """``workers``, ``scheduler`` and ``store`` of the solve engine from the command line."""
+    store = getattr(args, "store", None)
+    if store is not None and Path(store).exists() and not Path(store).is_dir():
+        raise CLIError(f"--store: {store!r} is a file, not a folder", 2)
+    return {"workers": args.workers, "scheduler": args.scheduler, "store": store}
 
 
 def identification_arguments(p: argparse.ArgumentParser) -> None:

@@ -17,7 +17,8 @@ from .fit import Group, ModelFit, fit_model, groups_of
 from .settings import DiscrepancySettings
 from .tables import ForwardTables, build_tables
 
-__all__ = ["Discrepancy", "find_discrepancy", "residual_structure", "resistance_remarks"]
+__all__ = ["Discrepancy", "find_discrepancy", "residual_structure", "resistance_remarks",
+           "thickness_trend"]
 
 
 @dataclass
@@ -101,11 +102,48 @@ def residual_structure(groups: Sequence[Group], fit: ModelFit) -> list[str]:
         t, p = stats.ttest_ind(a, b, equal_var=False)
         out.append(f"{fillers[0]} minus {fillers[1]}: {a.mean() - b.mean():+.2f} "
                    f"(Welch t = {t:.2f}, p = {p:.2g})")
-    th = np.array([g.thickness_m if g.thickness_m is not None else np.nan for g in groups])
-    if np.isfinite(th).all() and np.unique(th).size >= 2:
-        slope, _, r, p, se = stats.linregress(th * 1e3, z)
+    trend = thickness_trend(groups, fit)
+    if trend is not None:
+        slope, se, p = trend
         out.append(f"thickness: trend {slope:+.2f} per mm (+-{se:.2f}, p = {p:.2g})")
     return out
+
+
+def thickness_trend(groups: Sequence[Group], fit: ModelFit
+                    ) -> tuple[float, float, float] | None:
+    """(slope per mm, its standard error, p-value) of the standardised residuals of ``fit``
+    against the sample thickness; None without two thicknesses or more."""
+    th = np.array([g.thickness_m if g.thickness_m is not None else np.nan for g in groups])
+    if not (np.isfinite(th).all() and np.unique(th).size >= 2):
+        return None
+    z = (np.array([g.mean for g in groups]) - fit.predicted) / np.sqrt(fit.variance)
+    res = stats.linregress(th * 1e3, z)
+    return float(res.slope), float(res.stderr), float(res.pvalue)
+
+
+def _explains_thickness_trend(d: "Discrepancy", st: DiscrepancySettings
+                              ) -> tuple[list[ModelFit], str]:
+    """The thickness-dependent candidates (a tester effect) that a significant thickness
+    trend of the base residuals supports: a trend no RVE effect can make (an RVE does not
+    know the sample's thickness), which the candidate removes while fitting better than
+    the base. Returns them and the sentence that says so."""
+    base = thickness_trend(d.groups, d.base)
+    if base is None or base[2] >= st.significance:
+        return [], ""
+    needs = {e.name for e in d.effects if e.needs_thickness}
+    out, words = [], []
+    for m in d.candidates:
+        after = thickness_trend(d.groups, m)
+        if (m.name in needs and m.bic < d.base.bic and after is not None
+                and after[2] >= st.significance):
+            out.append(m)
+            words.append(f"{m.name} removes it (p = {after[2]:.2g} after)")
+    if not out:
+        return [], (f" The base residuals trend with the sample thickness (p = {base[2]:.2g}), "
+                    "which no RVE effect can make; no thickness-dependent candidate removes "
+                    "it.")
+    return out, (f" The base residuals trend with the sample thickness (p = {base[2]:.2g}), "
+                 "which no RVE effect can make: " + "; ".join(words) + ".")
 
 
 def find_discrepancy(measurements: Measurements, *,
@@ -205,6 +243,12 @@ def _decide(d: Discrepancy, st: DiscrepancySettings) -> None:
                       "itself: inside the grid the model cannot reach the measurements.")
         significant = True
     supported = [m for m in d.candidates if d.base.bic - m.bic >= st.bic_margin]
+    by_trend, trend_line = _explains_thickness_trend(d, st)
+    base_line += trend_line
+    if by_trend:
+        significant = True
+        supported += [m for m in by_trend if m not in supported]
+        supported.sort(key=lambda m: m.bic)
     edge = [m.name for m in supported if m.at_grid_edge]
     supported = [m for m in supported if not m.at_grid_edge]
     if edge:

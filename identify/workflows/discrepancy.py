@@ -24,12 +24,13 @@ __all__ = ["run_discrepancy"]
 def run_discrepancy(meas: Measurements, settings: DiscrepancySettings, out: Path, *,
                     effects: list | None = None, progress: bool = True,
                     echo: Callable[[str], None] = print, workers: int | None = None,
-                    scheduler: str | None = None) -> Discrepancy:
+                    scheduler: str | None = None, store: str | Path | None = None
+                    ) -> Discrepancy:
     """The workflow on ``meas`` (``effects``: the candidates, default the whole library)
     with its report in ``out``: discrepancy.md, .json, .png, manifest.json. The forward
     tables' full solves run on the solve engine (in this process, on ``workers`` local
-    processes or on the Dask ``scheduler``) and are kept in ``out/solves``: a re-run
-    (another table, or after a kill) redoes none that finished."""
+    processes or on the Dask ``scheduler``) and are kept in ``out/solves`` or ``store``: a
+    re-run (another table, or after a kill) on the same store redoes none that finished."""
     from tqdm.auto import tqdm
 
     out = Path(out)
@@ -37,7 +38,8 @@ def run_discrepancy(meas: Measurements, settings: DiscrepancySettings, out: Path
     comps = {f: fractions_of(f) for f in meas.formulations}
     singles = {f: c for f, c in comps.items() if len(c) == 1}
     effects = default_effects() if effects is None else list(effects)
-    with open_engine(out, workers=workers, scheduler=scheduler, echo=echo) as engine, \
+    with open_engine(out, workers=workers, scheduler=scheduler, store=store,
+                     echo=echo) as engine, \
             tqdm(total=n_solves(len(singles), settings, effects), desc="forward solves",
                  unit="solve", disable=not progress) as bar:
         tables = build_tables(singles, settings=settings, effects=effects,

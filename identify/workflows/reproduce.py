@@ -114,11 +114,15 @@ def _temperature_field(ident: Identification, formulation: str, out: Path) -> li
 
 
 def open_engine(out: Path, *, workers: int | None = None, scheduler: str | None = None,
+                store: str | Path | None = None,
                 echo: Callable[[str], None] = print) -> SolveEngine:
     """The solve engine of a run writing to ``out``: every full solve is kept in
-    ``out/solves`` (a re-run of a killed command redoes none that finished), run in this
-    process, on ``workers`` local processes or on the Dask ``scheduler``."""
-    return SolveEngine(Path(out) / "solves", workers=workers, scheduler=scheduler, echo=echo)
+    ``out/solves``, or in ``store`` (a folder several runs share: a solve is keyed by its
+    RVE, parameters, solver and tolerance, never by the measurements), so a re-run of a
+    killed command, or another run on the same store, redoes none that finished; run in
+    this process, on ``workers`` local processes or on the Dask ``scheduler``."""
+    return SolveEngine(Path(store) if store is not None else Path(out) / "solves",
+                       workers=workers, scheduler=scheduler, echo=echo)
 
 
 def _identify_all(meas: Measurements, settings: ReproduceSettings, progress: bool,
@@ -139,13 +143,15 @@ def _identify_all(meas: Measurements, settings: ReproduceSettings, progress: boo
 
 def run_reproduce(settings: ReproduceSettings, out: Path, *, progress: bool = True,
                   echo: Callable[[str], None] = print, workers: int | None = None,
-                  scheduler: str | None = None) -> list[Path]:
+                  scheduler: str | None = None, store: str | Path | None = None
+                  ) -> list[Path]:
     """The whole pipeline on the shipped data; returns the files written (manifest last).
 
     Every full solve runs on the solve engine (:func:`open_engine`: in this process, on
     ``workers`` local processes or on the Dask ``scheduler``) and is kept in ``out/solves``.
     """
-    with open_engine(out, workers=workers, scheduler=scheduler, echo=echo) as engine:
+    with open_engine(out, workers=workers, scheduler=scheduler, store=store,
+                     echo=echo) as engine:
         return _reproduce(settings, Path(out), progress, echo, engine)
 
 
@@ -274,11 +280,13 @@ def _reproduce_markdown(head, idents, meas, validation, lofo, psd_fits, timing,
 
 def run_identify(meas: Measurements, settings: ReproduceSettings, out: Path, *,
                  progress: bool = True, echo: Callable[[str], None] = print,
-                 workers: int | None = None, scheduler: str | None = None) -> list[Path]:
+                 workers: int | None = None, scheduler: str | None = None,
+                 store: str | Path | None = None) -> list[Path]:
     """Identification of a user's measurement table; returns the files written. Full
     solves as in :func:`run_reproduce` (kept in ``out/solves``)."""
     out = Path(out)
-    with open_engine(out, workers=workers, scheduler=scheduler, echo=echo) as engine:
+    with open_engine(out, workers=workers, scheduler=scheduler, store=store,
+                     echo=echo) as engine:
         begin_run(out)
         t0 = time.perf_counter()
         idents = _identify_all(meas, settings, progress, echo, engine)
