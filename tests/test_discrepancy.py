@@ -296,3 +296,30 @@ def test_implausible_resistances_and_grid_ends_are_reported():
                            "solved grid; 0.045x the paper's 2.2e-08)")
     # plausible values: nothing to say
     assert resistance_remarks(fit(R_Al2O3_silicone=2e-8, R_AlN_silicone=3e-8), SETTINGS) == []
+
+
+def test_a_thickness_trend_supports_the_tester_candidate_below_the_bic_margin():
+    from itr_identify.discrepancy.decision import Discrepancy, _decide, thickness_trend
+    from itr_identify.discrepancy.fit import Group, ModelFit
+
+    rng = np.random.default_rng(1)
+    groups, measured = [], []
+    for f, phi in (("Al2O3-50", 0.5), ("Al2O3-55", 0.55), ("Al2O3-60", 0.6)):
+        for t_mm in (0.5, 1.0, 1.5):
+            k = (1.0 + 2 * phi) * (1 - 0.04 * (1.5 - t_mm)) + rng.normal(0, 0.004)
+            groups.append(Group(f, "Al2O3", phi, t_mm * 1e-3, k, 0.01, 4))
+            measured.append(k)
+    measured = np.array(measured)
+    flat = np.array([(1.0 + 2 * g.fraction) * 0.98 for g in groups])   # no thickness term
+    tester = ModelFit(fx.TesterContact().name, {"R_Al2O3_silicone": 2e-8,
+                                                fx.TesterContact().parameter: 1e-5},
+                      (5e-6, 1.5e-5), measured + rng.normal(0, 0.004, measured.size),
+                      np.full(measured.size, 1e-4), 0.0, 9.0, 100.0, 2)
+    base = ModelFit("base", {"R_Al2O3_silicone": 2e-8}, None, flat,
+                    np.full(measured.size, 1e-4), 0.0, 30.0, 103.0, 1)
+    assert thickness_trend(groups, base)[2] < 1e-3 < thickness_trend(groups, tester)[2]
+    d = Discrepancy("none", "", groups, base, [tester], {}, 1e-4, [], [],
+                    [fx.TesterContact()])
+    _decide(d, SETTINGS)                     # BIC lower by 3 only (< the margin of 6)
+    assert d.verdict == "named" and d.winner is tester, d.statement
+    assert "trend with the sample thickness" in d.statement
