@@ -71,6 +71,7 @@ def test_identify_bad_tables_fail_in_one_line(tmp_path, capsys, text, expected):
     (["reproduce", "--parametrisation", "spots"], "--parametrisation"),
     (["reproduce", "--box-um", "-2"], "--box-um"),
     (["reproduce", "--fidelity", "best"], "--fidelity"),
+    (["reproduce", "--store", "/dev/null"], "--store: '/dev/null' is a file"),
 ])
 def test_bad_invocations_fail_in_one_line(tmp_path, capsys, args, expected):
     assert main([*args, "--out", str(tmp_path / "o")]) == 2
