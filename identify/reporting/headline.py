@@ -32,7 +32,7 @@ from ..forward.fidelity import fidelity_name
 from ..inference.pipeline import Identification
 from .error_budget import error_budget
 
-__all__ = ["parameter_flag", "choose_parametrisation", "headline", "headline_lines",
+__all__ = ["parameter_flag", "prior_ends", "choose_parametrisation", "headline", "headline_lines",
            "headline_markdown", "EDGE_FACTOR",
            "UNDETERMINED_DECADES", "FLAGS"]
 
@@ -47,6 +47,15 @@ FLAGS = ("at the prior's edge", "undetermined", "bounded on one side", "voxel-sp
          "determined")
 
 
+def prior_ends(post, name: str) -> tuple[bool, bool]:
+    """Whether the 90 % interval of ``name`` reaches the prior's lower and upper end
+    (within :data:`EDGE_FACTOR`); ``post`` a :class:`~itr_identify.inference.calibrate.
+    Posterior`."""
+    p_lo, p_hi = post.prior
+    lo, hi = post.interval(name)
+    return lo <= p_lo * EDGE_FACTOR, hi >= p_hi / EDGE_FACTOR
+
+
 def parameter_flag(ident: Identification, name: str) -> str:
     """The flag of parameter ``name`` of ``ident`` (one of :data:`FLAGS`)."""
     post = ident.posterior
@@ -55,7 +64,7 @@ def parameter_flag(ident: Identification, name: str) -> str:
     best = post.best[name]
     if best <= p_lo * EDGE_FACTOR or best >= p_hi / EDGE_FACTOR:
         return FLAGS[0]
-    low_end, high_end = lo <= p_lo * EDGE_FACTOR, hi >= p_hi / EDGE_FACTOR
+    low_end, high_end = prior_ends(post, name)
     if (low_end and high_end) or math.log10(hi / lo) > UNDETERMINED_DECADES:
         return FLAGS[1]
     if low_end or high_end:

@@ -14,7 +14,7 @@ from itr_fv.rve_spec import SEED_STRIDE
 from ..inference.measurements import Measurements
 from ..inference.pipeline import Identification
 from .error_budget import error_budget, error_budget_lines
-from .headline import EDGE_FACTOR
+from .headline import prior_ends
 
 __all__ = ["identified_dict", "selection", "table3_lines", "table5_lines", "fidelity_statement",
            "table6_lines",
@@ -210,9 +210,9 @@ def identifiability_lines(idents: Mapping[str, Identification]) -> list[str]:
         names = ident.posterior.names
         prior = ident.posterior.prior
         for n in names:
-            lo, hi = ident.posterior.interval(n)
-            if hi >= prior[1] / EDGE_FACTOR or lo <= prior[0] * EDGE_FACTOR:
-                end = "upper" if hi >= prior[1] / EDGE_FACTOR else "lower"
+            low_end, high_end = prior_ends(ident.posterior, n)
+            if low_end or high_end:
+                end = "upper" if high_end else "lower"
                 lines.append(f"- **{par}, {n}**: the 90 % interval reaches the prior's {end} "
                              f"end ({prior[0]:g} - {prior[1]:g} m^2 K/W): the data bound it "
                              "from one side only.")
@@ -346,17 +346,17 @@ def difference_lines(idents: Mapping[str, Identification]) -> list[str]:
     lines = ["| parameter | parametrisation | ours (best) / paper | paper's value inside our "
              "90 % interval | remark |", "|---|---|---|---|---|"]
     for par, ident in idents.items():
-        prior = ident.posterior.prior
         for n in ident.posterior.names:
             paper = _paper_value(n)
             if paper is None:
                 continue
             lo, hi = ident.posterior.interval(n)
+            low_end, high_end = prior_ends(ident.posterior, n)
             remarks = []
-            if hi >= prior[1] / EDGE_FACTOR:
+            if high_end:
                 remarks.append("interval reaches the prior's upper end: the data bound it "
                                "only from below")
-            if lo <= prior[0] * EDGE_FACTOR:
+            if low_end:
                 remarks.append("interval reaches the prior's lower end")
             kind = parse_parameter(n)[0]
             if kind == "Rff":
