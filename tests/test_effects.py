@@ -9,7 +9,6 @@ import pytest
 from itr_fv.rve_spec import RVESpec
 from itr_identify.discrepancy import effects as fx
 from itr_identify.discrepancy.effects import (
-    AIR,
     AIR_CONDUCTIVITY,
     Effect,
     FillerConductivity,
@@ -39,7 +38,7 @@ def test_the_library_holds_five_distinct_effects():
     assert [e.key for e in fx.by_key(["spots", "matrix"])] == ["spots", "matrix"]
     with pytest.raises(ValueError, match="unknown effect 'shape'"):
         fx.by_key(["shape"])
-    assert {e.kind for e in lib} == {"material", "geometry", "measurement"}
+    assert {e.kind for e in lib} == {"material", "geometry", "measurement", "variance"}
     for e in lib:
         assert e.signature and e.separate_by
         assert e.nominal in e.values
@@ -55,24 +54,33 @@ def test_matrix_and_filler_conductivity_change_only_their_phases(rve):
     assert fk["Al2O3"] == pytest.approx(0.1 * base.conductivity["Al2O3"])
 
 
-def test_porosity_adds_nested_air_voids_clear_of_the_particles(rve):
+def test_porosity_homogenises_air_into_the_matrix_at_its_share_of_the_matrix(rve):
     _, ms = rve
     por = Porosity()
-    small, large = (por.microstructure(ms, v, seed=5) for v in (0.012, 0.024))
-    air_id = small.names.index(AIR)
-    for img, v in ((small, 0.012), (large, 0.024)):
-        frac = np.mean(img.material_ids == img.names.index(AIR))
-        assert frac == pytest.approx(v, rel=0.35)          # 2-voxel pores, voxelized
-        # the filler is untouched
-        assert np.array_equal(img.material_ids == img.names.index("Al2O3"),
-                              ms.material_ids == ms.names.index("Al2O3"))
-    # the voids at 1.2 % are among those at 2.4 %
-    assert np.all(large.material_ids[small.material_ids == air_id]
-                  == large.names.index(AIR))
-    mat = por.materials(ForwardModel("Al2O3-55", {"Al2O3": 0.55}, PARAMETRISATIONS["gap"],
-                                     SMALL).materials({"R_Al2O3_silicone": 2e-8}), 0.02)
-    assert mat.conductivity[AIR] == AIR_CONDUCTIVITY
-    assert mat.resistance_between(AIR, "silicone") == 0.0
+    assert por.values[-1] >= 0.10                  # the grid reaches the physical range
+    base = ForwardModel("Al2O3-55", {"Al2O3": 0.55}, PARAMETRISATIONS["gap"],
+                        SMALL).materials({"R_Al2O3_silicone": 2e-8})
+    assert por.materials_in(ms, base, 0.0) is base
+    phi = np.mean(ms.material_ids > 0)
+    k_m, k_air = base.conductivity["silicone"], AIR_CONDUCTIVITY
+    for p in (0.02, 0.1):
+        mat = por.materials_in(ms, base, p)
+        share = p / (1 - phi)
+        # Hashin-Shtrikman upper bound with the silicone as the continuous phase
+        # k_m + share / (1 / (k_air - k_m) + (1 - share) / (3 k_m)), which Maxwell's
+        # dispersed-sphere formula reaches
+        hs = k_m + share / (1 / (k_air - k_m) + (1 - share) / (3 * k_m))
+        assert mat.conductivity["silicone"] == pytest.approx(hs, rel=1e-12)
+        assert mat.conductivity["Al2O3"] == base.conductivity["Al2O3"]
+    # the same void fraction takes a larger share of the matrix at a higher filler fraction
+    assert por.materials_in(ms, base, 0.1).conductivity["silicone"] < maxwell(k_m, 0.1)
+    with pytest.raises(ValueError, match="value"):
+        por.materials_in(ms, base, 0.4)
+
+
+def maxwell(k_m, share):
+    return k_m * (2 * k_m + AIR_CONDUCTIVITY - 2 * share * (k_m - AIR_CONDUCTIVITY)) / (
+        2 * k_m + AIR_CONDUCTIVITY + share * (k_m - AIR_CONDUCTIVITY))
 
 
 def test_filler_fraction_removes_particles_down_to_the_factor(rve):

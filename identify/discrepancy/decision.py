@@ -10,10 +10,12 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import stats
 
+from ..forward.model import MATRIX
 from ..inference.formulations import fractions_of
 from ..inference.measurements import Measurements
 from .effects import Effect
 from .fit import Group, ModelFit, fit_model, groups_of
+from .model_form import AMPLITUDE_RANGE, LeaveOneOut, ModelFormFit, fit_model_form, leave_one_out
 from .settings import DiscrepancySettings
 from .tables import ForwardTables, build_tables
 
@@ -42,6 +44,12 @@ class Discrepancy:
         The residuals' trends (filler fraction, filler type, thickness).
     left_out : list of str
         Formulations not used (two-filler).
+    model_form : ModelFormFit or None
+        The base model with the model-form term (:mod:`itr_identify.discrepancy.model_form`),
+        calibrated when no candidate is named.
+    leave_one_out : dict of str to LeaveOneOut
+        With the model-form term: each formulation predicted from the others by the base
+        model alone (``"base"``) and with the term (``"model-form"``).
     """
 
     verdict: str
@@ -56,6 +64,8 @@ class Discrepancy:
     effects: list[Effect]
     winner: ModelFit | None = None
     tables: ForwardTables | None = None
+    model_form: ModelFormFit | None = None
+    leave_one_out: dict[str, LeaveOneOut] | None = None
 
     def p_value(self, fit: ModelFit) -> float:
         return float(stats.chi2.sf(fit.chi_square, fit.dof(len(self.groups))))
@@ -79,7 +89,12 @@ class Discrepancy:
                 "base": fit_dict(self.base), "candidates": [fit_dict(c) for c in self.candidates],
                 "skipped": self.skipped, "structure": self.structure,
                 "left_out": self.left_out,
-                "effects": [e.describe() for e in self.effects]}
+                "effects": [e.describe() for e in self.effects],
+                "model_form": self.model_form.to_dict() if self.model_form else None,
+                "leave_one_out": ({k: v.to_dict() for k, v in self.leave_one_out.items()}
+                                  if self.leave_one_out else None),
+                "corrections": ({f: c.to_dict() for f, c in self.tables.corrections.items()}
+                                if self.tables is not None else {})}
 
 
 def residual_structure(groups: Sequence[Group], fit: ModelFit) -> list[str]:
@@ -196,7 +211,35 @@ def find_discrepancy(measurements: Measurements, *,
                       float(stats.chi2.sf(base.chi_square, base.dof(len(groups)))),
                       residual_structure(groups, base), left_out, effects, None, tables)
     _decide(out, settings)
+    if out.verdict != "named":
+        _add_model_form(out)
     return out
+
+
+def _add_model_form(d: Discrepancy) -> None:
+    """Calibrate the base model with the model-form term, measure the leave-one-formulation-
+    out predictions with and without it, and say so in the statement."""
+    d.model_form = mf = fit_model_form(d.tables, d.groups)
+    if len({g.formulation for g in d.groups}) >= 3:
+        d.leave_one_out = {"base": leave_one_out(d.tables, d.groups, with_term=False),
+                           "model-form": leave_one_out(d.tables, d.groups)}
+    s, s_lo, s_hi = mf.amplitude
+    rs = "; ".join(f"{k} {v[0]:.2g} ({v[1]:.2g} - {v[2]:.2g})"
+                   for k, v in mf.resistances.items())
+    text = (f" With a model-form term (a Gaussian-process discrepancy in the filler fraction, "
+            f"amplitude {100 * s:.2g} % of k, 90 % {100 * s_lo:.2g} - {100 * s_hi:.2g} %), "
+            f"the resistances are {rs} m^2 K/W (median, 90 % interval)")
+    if d.leave_one_out:
+        b, m = d.leave_one_out["base"], d.leave_one_out["model-form"]
+        n = len(m.labels)
+        text += (f"; each formulation predicted from the others falls inside the 90 % "
+                 f"predictive interval for {int(m.covered.sum())} of {n} groups with it, "
+                 f"{int(b.covered.sum())} of {n} without")
+    if mf.at_prior_edge:
+        text += (f"; but the amplitude sits at its prior's upper end "
+                 f"({100 * AMPLITUDE_RANGE[1]:g} %): the model misses by more than a "
+                 "model-form term is meant to carry, and these resistances are not to be used")
+    d.statement += text + "."
 
 
 def resistance_remarks(fit: ModelFit, st: DiscrepancySettings) -> list[str]:
@@ -211,8 +254,8 @@ def resistance_remarks(fit: ModelFit, st: DiscrepancySettings) -> list[str]:
     lo, hi = st.physical_r_m2K_per_W
     out = []
     for name, r in fit.parameters.items():
-        if not name.startswith("R_"):
-            continue
+        if not (name.startswith("R_") and name.endswith("_" + MATRIX)):
+            continue                  # not a filler-matrix resistance (an effect's parameter)
         notes = []
         if r <= grid[0] * (1 + 1e-9) or r >= grid[-1] * (1 - 1e-9):
             notes.append(f"at the {'lower' if r <= grid[0] * (1 + 1e-9) else 'upper'} end "
@@ -225,6 +268,14 @@ def resistance_remarks(fit: ModelFit, st: DiscrepancySettings) -> list[str]:
         if notes:
             out.append(f"{name} = {r:.2g} m^2 K/W ({'; '.join(notes)})")
     return out
+
+
+def _physical(e: Effect, value: float) -> bool:
+    """Whether ``value`` of ``e`` lies in its physical range (where it states one)."""
+    if e.physical_range is None:
+        return True
+    lo, hi = e.physical_range
+    return lo - 1e-12 <= value <= hi * (1 + 1e-9)
 
 
 def _decide(d: Discrepancy, st: DiscrepancySettings) -> None:
@@ -254,12 +305,23 @@ def _decide(d: Discrepancy, st: DiscrepancySettings) -> None:
     if edge:
         base_line += (f" Lowering the BIC by {st.bic_margin:g} or more only with a resistance "
                       f"at the edge of its range, hence not named: {', '.join(edge)}.")
+    implausible = [(m, e) for m in supported for e in d.effects
+                   if e.name == m.name and not _physical(e, m.parameters[e.parameter])]
+    if implausible:
+        supported = [m for m in supported if m not in [x for x, _ in implausible]]
+        base_line += " Lowering the BIC by {:g} or more only with a value outside its " \
+            "physical range, hence not named: {}.".format(st.bic_margin, "; ".join(
+                f"{m.name} ({e.parameter} = {m.parameters[e.parameter]:.3g}, 90 % "
+                f"{m.interval[0]:.3g} - {m.interval[1]:.3g}; physical "
+                f"{e.physical_range[0]:g} - {e.physical_range[1]:g}; what would decide: "
+                f"{e.separate_by})" for m, e in implausible))
     if not supported:
         d.verdict = "unexplained" if significant else "none"
         if significant:
             best = d.candidates[0] if d.candidates else None
             near = (f" The closest candidate, {best.name}, lowers the BIC by "
-                    f"{d.base.bic - best.bic:.1f} (< {st.bic_margin:g})." if best else "")
+                    f"{d.base.bic - best.bic:.1f} (< {st.bic_margin:g})."
+                    if best and d.base.bic - best.bic < st.bic_margin else "")
             d.statement = (base_line + " No candidate of the library explains them: an "
                            "unexplained discrepancy (a missing effect outside the library, or "
                            "an error in the data)." + near)

@@ -138,7 +138,7 @@ def _interp(logr: np.ndarray, theta_axis: np.ndarray, values: np.ndarray, e: Eff
                                                    if e is not None else 0]
     base = np.exp(RegularGridInterpolator((logr,), np.log(col), method="cubic")(
         fine_r[:, None]))
-    if values.ndim == 1 or e is None or e.kind == "measurement":
+    if values.ndim == 1 or e is None or not e.solved:
         return np.repeat(base[:, None], fine_t.size, axis=1)
     scale = np.log if e.log_scale else (lambda x: x)
     ax, ft = scale(theta_axis) - scale(e.nominal), scale(fine_t) - scale(e.nominal)
@@ -221,6 +221,26 @@ def profile_interval(profile: np.ndarray, axis: np.ndarray, drop: float = LR_DRO
     return lo, hi
 
 
+def _fraction_slopes(where: dict[str, tuple[str, float]], k: dict[str, np.ndarray]
+                     ) -> dict[str, np.ndarray]:
+    """``d ln k / d phi`` of the model at each formulation over the resistance axis: per
+    filler, a polynomial in phi (degree up to 2, below the number of its formulations)
+    through ``ln k`` of its formulations, differentiated at each; 0 for a filler with one
+    formulation. ``where[f] = (filler, phi)``, ``k[f]`` the model on the resistance axis."""
+    out = {}
+    for fl in {w[0] for w in where.values()}:
+        fs = [f for f in where if where[f][0] == fl]
+        phi = np.array([where[f][1] for f in fs])
+        deg = min(2, np.unique(phi).size - 1)
+        if deg < 1:
+            out.update({f: np.zeros_like(k[f]) for f in fs})
+            continue
+        coef = np.polyfit(phi, np.log(np.array([k[f] for f in fs])), deg)   # (deg+1, nR)
+        for f, x in zip(fs, phi):
+            out[f] = sum(c * p * x ** (p - 1) for c, p in zip(coef, range(deg, 0, -1)))
+    return out
+
+
 def fit_model(tables: ForwardTables, groups: Sequence[Group], effect: Effect | None
               ) -> ModelFit:
     """Calibrate the base model (``effect=None``) or base + ``effect`` on the groups."""
@@ -229,15 +249,15 @@ def fit_model(tables: ForwardTables, groups: Sequence[Group], effect: Effect | N
     fine_r = np.linspace(logr[0], logr[-1], st.fine_points)
     fine_t = _fine_axis(effect, 41)
     fillers = sorted({g.filler for g in groups})
-    scatter = {fl: math.sqrt(np.mean([tables.rve_scatter[g.formulation] ** 2
+    scatter = {fl: math.sqrt(np.mean([tables.relative_sd(g.formulation) ** 2
                                       for g in groups if g.filler == fl])) for fl in fillers}
     kmesh = {}
 
     def model_k(g: Group, i=slice(None), j=slice(None)) -> np.ndarray:
         if g.formulation not in kmesh:
-            vals = (tables.base[g.formulation] if effect is None
+            vals = (tables.base[g.formulation] if effect is None or not effect.solved
                     else tables.effect[effect.name][g.formulation])
-            kmesh[g.formulation] = tables.replica_factor[g.formulation] * _interp(
+            kmesh[g.formulation] = tables.level(g.formulation) * _interp(
                 logr, np.asarray(effect.values if effect else [0.0], dtype=float), vals,
                 effect, fine_r, fine_t)
         k = kmesh[g.formulation][i, j]
@@ -246,22 +266,37 @@ def fit_model(tables: ForwardTables, groups: Sequence[Group], effect: Effect | N
                                 else fine_t[None, j])
         return k
 
+    forms = _by_formulation(groups)
+    slopes = _fraction_slopes({f: (m[0].filler, m[0].fraction) for f, m in forms.items()},
+                              {f: model_k(m[0])[:, 0] for f, m in forms.items()})
+
+    def shared_sd(f: str, fl: str, i=slice(None), j=slice(None)) -> np.ndarray:
+        """Relative sd of the error shared by a formulation's groups on the (R, theta)
+        mesh: the RVE scatter and, for a variance effect, the effect's share."""
+        if effect is None:
+            return np.asarray(scatter[fl])
+        extra = effect.formulation_sd(slopes[f][i, None] if np.ndim(slopes[f][i])
+                                      else slopes[f][i], fine_t[j])
+        return np.sqrt(scatter[fl] ** 2 + extra ** 2)
+
     ll = {fl: np.zeros((fine_r.size, fine_t.size)) for fl in fillers}
-    for f, members in _by_formulation(groups).items():
+    for f, members in forms.items():
         fl = members[0].filler
         ll[fl] = ll[fl] + _gaussian_shared([g.mean for g in members],
                                            [model_k(g) for g in members],
                                            [g.standard_error for g in members],
-                                           scatter[fl])[0]
+                                           shared_sd(f, fl))[0]
     profile = sum(ll[fl].max(axis=0) for fl in fillers)            # (ntheta,)
     j = int(np.argmax(profile))
     params, pred, var = {}, np.zeros(len(groups)), np.zeros(len(groups))
     best_i = {fl: int(np.argmax(ll[fl][:, j])) for fl in fillers}
     for fl in fillers:
         params[resistance_name(fl)] = float(10 ** fine_r[best_i[fl]])
+    sd_best = {f: float(shared_sd(f, m[0].filler, best_i[m[0].filler], j))
+               for f, m in forms.items()}
     for i, g in enumerate(groups):
         pred[i] = float(model_k(g, best_i[g.filler], j))
-        var[i] = g.standard_error ** 2 + (scatter[g.filler] * pred[i]) ** 2
+        var[i] = g.standard_error ** 2 + (sd_best[g.formulation] * pred[i]) ** 2
     interval = None
     edge = any(best_i[fl] in (0, fine_r.size - 1) for fl in fillers)
     if effect is not None:
@@ -271,7 +306,7 @@ def fit_model(tables: ForwardTables, groups: Sequence[Group], effect: Effect | N
     p = len(fillers) + (effect is not None)
     index = {id(g): i for i, g in enumerate(groups)}
     chi2 = float(sum(_gaussian_shared([g.mean for g in m], [pred[index[id(g)]] for g in m],
-                                      [g.standard_error for g in m], scatter[m[0].filler])[1]
-                     for m in _by_formulation(groups).values()))
+                                      [g.standard_error for g in m], sd_best[f])[1]
+                     for f, m in forms.items()))
     return ModelFit("base" if effect is None else effect.name, params, interval, pred, var,
                     lmax, chi2, -2 * lmax + p * math.log(len(groups)), p, edge)

@@ -81,7 +81,7 @@ def synthetic_measurements(formulations: Sequence[str], resistances: dict[str, f
                 m = mat
                 for e, v in ([(effect, value)] if effect is not None else []) + list(extra):
                     ms = e.microstructure(ms, v, seed=rve_seed + r)
-                    m = e.materials(m, v)
+                    m = e.materials_in(ms, m, v)
                 ks.append(full_solve(ms, m, s.solver_tol).mean())
             k = float(np.mean(ks))
             t = (np.resize(np.asarray(thickness_mm, dtype=float), replicates) * 1e-3

@@ -1,19 +1,23 @@
 """Forward tables of the discrepancy workflow: per single-filler formulation, full solves of
 one RVE on a grid of the filler-matrix resistance for the base model and for every candidate
-effect, and the replica factor and RVE scatter from the other replicas."""
+effect, the replica factor and RVE scatter from the other replicas, and the faithful
+correction of their level (:mod:`itr_identify.forward.fidelity`: larger packings at two
+voxels, the voxel bias removed by Richardson extrapolation) at the scatter's resistance."""
 
 from __future__ import annotations
 
+import math
 import time
 import warnings
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from itr_fv.parameters import parameter_name
 from itr_surrogate.engine import RVEData, SolveEngine, SolveRequest
 
+from ..forward.fidelity import Correction
 from ..forward.model import MATRIX, PARAMETRISATIONS, ForwardModel
 from .effects import Effect, default_effects
 from .settings import DiscrepancySettings
@@ -24,8 +28,9 @@ __all__ = ["ForwardTables", "build_tables", "n_solves", "resistance_name"]
 @dataclass
 class ForwardTables:
     """Full-solver k_iso (W/(m K)) per formulation: ``base[f]`` on the resistance grid and
-    ``effect[name][f]`` on resistance x effect-parameter grids, the replica factor and
-    RVE scatter per formulation."""
+    ``effect[name][f]`` on resistance x effect-parameter grids (the first replica), the
+    replica factor and RVE scatter per formulation, and the faithful correction per
+    formulation (empty without :attr:`DiscrepancySettings.faithful`)."""
 
     settings: DiscrepancySettings
     effects: list[Effect]
@@ -35,18 +40,35 @@ class ForwardTables:
     rve_scatter: dict[str, float]
     solves: int = 0
     seconds: float = 0.0
+    corrections: dict[str, Correction] = field(default_factory=dict)
+
+    def level(self, formulation: str) -> float:
+        """Factor from the first replica's table to the model's k: the replica factor
+        times the faithful correction's factor (1 without one)."""
+        c = self.corrections.get(formulation)
+        return self.replica_factor[formulation] * (c.factor if c is not None else 1.0)
+
+    def relative_sd(self, formulation: str) -> float:
+        """Relative standard uncertainty of the model's k of ``formulation``: the RVE
+        scatter and the faithful correction's uncertainty in quadrature."""
+        c = self.corrections.get(formulation)
+        return math.hypot(self.rve_scatter[formulation],
+                          c.relative_sd if c is not None else 0.0)
 
 
 def n_solves(n_formulations: int, settings: DiscrepancySettings,
              effects: Sequence[Effect]) -> int:
     """Full solves :func:`build_tables` makes for ``n_formulations`` single-filler ones."""
-    cols = 1 + sum(1 for e in effects for v in e.values
-                   if e.kind != "measurement" and v != e.nominal)
-    return n_formulations * (len(settings.r_grid_m2K_per_W) * cols + settings.forward.replicas)
+    cols = 1 + sum(1 for e in effects for v in e.values if e.solved and v != e.nominal)
+    faithful = 0 if settings.faithful is None else 2 * settings.faithful.packings
+    return n_formulations * (len(settings.r_grid_m2K_per_W) * cols + settings.forward.replicas
+                             + faithful)
+
 
 def resistance_name(filler: str) -> str:
     """The flat name of the filler-matrix resistance of ``filler``."""
     return parameter_name("R", filler, MATRIX)
+
 
 def build_tables(fractions: dict[str, dict[str, float]], *,
                  settings: DiscrepancySettings | None = None,
@@ -75,6 +97,7 @@ def build_tables(fractions: dict[str, dict[str, float]], *,
     s = settings.forward
     grid = list(settings.r_grid_m2K_per_W)
     base, table, factor, scatter = {}, {e.name: {} for e in effects}, {}, {}
+    corrections: dict[str, Correction] = {}
     n = 0
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -89,16 +112,24 @@ def build_tables(fractions: dict[str, dict[str, float]], *,
                                                    tick, purpose="RVE scatter")
             n += len(model.microstructures)
             factor[f], scatter[f] = model.replica_factor, model.rve_scatter
+            if settings.faithful is not None:
+                # the level of the replica mean at the scatter's resistance, corrected to
+                # the faithful packings' voxel-bias-free mean (one factor for the whole
+                # table of the formulation)
+                corrections[f] = model.correct_at(
+                    {r_name: settings.r_scatter_m2K_per_W}, settings.faithful,
+                    k_model=float(model.replica_k.mean()), tick=tick)
+                n += 2 * settings.faithful.packings
             ms0 = model.microstructures[0]
             # one column per (effect, value) that changes the RVE or its phases; the base
             # model first; every column is k_iso over the resistance grid
             columns = [("base", None, ms0, model.materials)]
             for e in effects:
                 for theta in e.values:
-                    if e.kind != "measurement" and theta != e.nominal:
+                    if e.solved and theta != e.nominal:
                         columns.append((e.name, theta, e.microstructure(ms0, theta, seed=s.seed),
-                                        lambda v, e=e, theta=theta: e.materials(
-                                            model.materials(v), theta)))
+                                        lambda v, e=e, theta=theta: e.materials_in(
+                                            ms0, model.materials(v), theta)))
             requests = [SolveRequest.for_materials(
                 RVEData.of(ms), materials_at({r_name: R}), s.solver_tol,
                 purpose="discrepancy table", formulation=f, effect=name,
@@ -109,8 +140,8 @@ def build_tables(fractions: dict[str, dict[str, float]], *,
             solved = {(name, theta): k[i] for i, (name, theta, _, _) in enumerate(columns)}
             base[f] = solved[("base", None)]
             for e in effects:
-                cols = [base[f] if (e.kind == "measurement" or theta == e.nominal)
+                cols = [base[f] if (not e.solved or theta == e.nominal)
                         else solved[(e.name, theta)] for theta in e.values]
                 table[e.name][f] = np.stack(cols, axis=1)          # (nR, ntheta)
     return ForwardTables(settings, effects, base, table, factor, scatter, n,
-                         time.perf_counter() - t0)
+                         time.perf_counter() - t0, corrections)

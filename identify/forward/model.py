@@ -409,11 +409,17 @@ class ForwardModel:
         u = self.correction.relative_sd if self.correction is not None else 0.0
         return math.hypot(self.carried_scatter, u)
 
-    def correct_at(self, values: Mapping[str, float], faithful: FaithfulRVE) -> Correction:
+    def correct_at(self, values: Mapping[str, float], faithful: FaithfulRVE, *,
+                   k_model: float | None = None,
+                   tick: Callable[[], None] | None = None) -> Correction:
         """Correct the model's level at ``values`` by full solves on faithful packings
         (packed once, re-voxelized at the coarse voxel; every solve on the engine and in
         :attr:`solves`); returns the correction, also kept in :attr:`correction` and
-        :attr:`corrections`."""
+        :attr:`corrections`.
+
+        ``k_model`` is the cheap model's k_iso at ``values``, W/(m K) (default: the reduced
+        basis's prediction without the correction; a model without a reduced basis, such
+        as a table of full solves, gives it); ``tick`` is called after every solve."""
         values = {p: float(values[p]) for p in self.parameters}
         fillers = list(self.fractions)
         with _local_work():
@@ -424,8 +430,9 @@ class ForwardModel:
                                          j, matrix=MATRIX, warn_box_cut=False)
                     self.faithful_rves.append((RVEData.of(ms), seed))
             mat = self.materials(values)
-            k_model = float(self._predict_raw({p: np.array([v])
-                                               for p, v in values.items()})[0][0])
+            if k_model is None:
+                k_model = float(self._predict_raw({p: np.array([v])
+                                                   for p, v in values.items()})[0][0])
         coarse = faithful.coarse_shape(fillers)
         requests = []
         for j, (rve, _) in enumerate(self.faithful_rves):
@@ -434,7 +441,7 @@ class ForwardModel:
                     grid, mat, self.settings.solver_tol, purpose=f"faithful {label}",
                     formulation=self.formulation, replica=faithful.seed + j))
         with _local_work():
-            results = self._solve_recorded(requests)
+            results = self._solve_recorded(requests, tick=tick)
         k = np.array([res.k_diagonal for res in results])
         corr = Correction(values, faithful.box_for(fillers), faithful.voxel_um,
                           faithful.coarse_voxel_um, [s for _, s in self.faithful_rves],

@@ -55,6 +55,7 @@ def report_lines(d: Discrepancy, settings: DiscrepancySettings) -> list[str]:
     lines += [_fit_row(d, m) for m in d.candidates]
     for name, why in d.skipped.items():
         lines.append(f"| {name} | not tried: {why} | | | | | |")
+    lines += _model_form_lines(d)
     lines += ["", f"A candidate is named when it lowers the BIC by {settings.bic_margin:g} or "
               f"more, leaves no significant residual (p >= {settings.significance:g}) and "
               "needs no resistance at the edge of its range; candidates within "
@@ -70,13 +71,66 @@ def report_lines(d: Discrepancy, settings: DiscrepancySettings) -> list[str]:
     lines += ["", "## Settings", "",
               f"- RVE: {f.box_um:g} um box, {f.voxel_um:g} um voxels, {f.replicas} replicas "
               f"(packing seed {f.seed}), gap contact model, solver tolerance {f.solver_tol:g}",
+              _faithful_line(settings, t),
               f"- resistance grid (m^2 K/W): "
               f"{', '.join(f'{r:.1e}' for r in settings.r_grid_m2K_per_W)}",
               "- RVE scatter per formulation (%): " + ", ".join(
                   f"{k} {100 * v:.2f}" for k, v in (t.rve_scatter.items() if t else [])),
-              f"- full solves: {t.solves if t else 0} in {t.seconds if t else 0:.0f} s"]
+              f"- forward tables: {t.solves if t else 0} full-solver results (solved now or "
+              f"read from the solve store) in {t.seconds if t else 0:.0f} s"]
     if d.left_out:
         lines.append(f"- left out (two fillers): {', '.join(d.left_out)}")
+    return lines
+
+
+def _faithful_line(settings: DiscrepancySettings, t) -> str:
+    fr = settings.faithful
+    if fr is None:
+        return ("- faithful correction: none (the tables' own level; 12 um at 0.25 um reads "
+                "Al2O3-60 about 3 % and AlN-60 10-12 % low)")
+    factors = ", ".join(f"{f} {c.factor:.3f} +- {100 * c.relative_sd:.1f} %"
+                        for f, c in (t.corrections.items() if t else []))
+    boxes = ", ".join(f"{k} {v:g} um" for k, v in fr.boxes_um)
+    return (f"- faithful correction ({fr.name}): {fr.packings} packings per formulation "
+            f"({boxes}) at {fr.voxel_um:g} and {fr.coarse_voxel_um:g} um, voxel bias "
+            f"extrapolated away, at R = {settings.r_scatter_m2K_per_W:.1e} m^2 K/W; factor "
+            f"on the table per formulation: {factors}")
+
+
+def _model_form_lines(d: Discrepancy) -> list[str]:
+    """The model-form term's section (only where it was calibrated)."""
+    mf = d.model_form
+    if mf is None:
+        return []
+    from ..discrepancy.model_form import AMPLITUDE_RANGE, LENGTH_RANGE
+
+    s, lo, hi = mf.amplitude
+    lines = ["", "## Model-form term (no candidate named)", "",
+             "ln k_measured = ln k_model(phi; R_filler) + delta_filler(phi) + error, delta a "
+             "Gaussian process in the filler fraction (squared-exponential; amplitude "
+             f"log-uniform {100 * AMPLITUDE_RANGE[0]:g} - {100 * AMPLITUDE_RANGE[1]:g} % of k, "
+             f"length {LENGTH_RANGE[0]:g} - {LENGTH_RANGE[1]:g} vol%), everything integrated "
+             "over its posterior.", "",
+             f"- amplitude: {100 * s:.2g} % of k (90 %: {100 * lo:.2g} - {100 * hi:.2g} %); "
+             f"length {mf.length_vol_percent:.3g} vol% (median)"]
+    lines += [f"- {k}: {v[0]:.3g} m^2 K/W (90 %: {v[1]:.3g} - {v[2]:.3g})"
+              for k, v in mf.resistances.items()]
+    if d.leave_one_out:
+        b, m = d.leave_one_out["base"], d.leave_one_out["model-form"]
+        lines += ["", "Leave one formulation out: its groups predicted from the others "
+                  "(90 % predictive interval, W/(m K)).", "",
+                  "| group | measured | base alone | inside | with the term | inside |",
+                  "|---|---|---|---|---|---|"]
+        for i, label in enumerate(m.labels):
+            lines.append(f"| {label} | {m.measured[i]:.3f} | {b.low[i]:.3f} - {b.high[i]:.3f}"
+                         f" | {'yes' if b.covered[i] else 'no'} | {m.low[i]:.3f} - "
+                         f"{m.high[i]:.3f} | {'yes' if m.covered[i] else 'no'} |")
+        lines.append("")
+        for name, x in (("base alone", b), ("with the term", m)):
+            err = np.abs(x.relative_error)
+            lines.append(f"- {name}: {int(x.covered.sum())} of {x.covered.size} inside; "
+                         f"error of the interval's centre mean {100 * err.mean():.1f} %, "
+                         f"max {100 * err.max():.1f} %")
     return lines
 
 

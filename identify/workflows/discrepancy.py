@@ -53,6 +53,8 @@ def run_discrepancy(meas: Measurements, settings: DiscrepancySettings, out: Path
     lines += ["", "Figure: `discrepancy.png` (relative error per group, before and after)."]
     files.append(write_text(out / "discrepancy.md", "\n".join(lines) + "\n"))
     files.append(write_manifest(out, files, {"job": "discrepancy", "measurements": meas.source,
-                                             "forward": settings.forward.to_dict()}))
+                                             "forward": settings.forward.to_dict(),
+                                             "faithful": (settings.faithful.to_dict()
+                                                          if settings.faithful else None)}))
     echo(f"discrepancy: {d.verdict}; wrote {out / 'discrepancy.md'}")
     return d
