@@ -5,7 +5,7 @@ voxel than the workflow's tables, packed with seeds the workflow never uses, and
 is built through ``itr_fv``'s public API, never with ``itr_identify.discrepancy.effects``:
 
 - matrix and filler conductivity: ``Materials.with_values``;
-- porosity: air spheres of 1 um placed among the particles (random sequential addition) and
+- porosity: air spheres of 0.8 um placed among the particles (random sequential addition) and
   voxelized with ``Microstructure.from_spheres`` (the workflow's candidate homogenises voids
   smaller than a voxel into the matrix: another model of the same physics);
 - filler fraction below nominal: particles removed at random, ``Microstructure.from_spheres``;
@@ -101,7 +101,7 @@ CASES = {
     "null": (None, None, False),
     "matrix": ("matrix", 0.26, False),
     "filler": ("filler", 0.25, False),
-    "porosity": ("porosity", 0.04, False),
+    "porosity": ("porosity", 0.03, False),
     "fraction": ("fraction", 0.9, False),
     "spots": ("spots", 1e-5, False),
     "tester": ("tester", 4e-5, True),
@@ -133,7 +133,7 @@ def remove_particles(ms: Microstructure, keep: np.ndarray) -> Microstructure:
                                        ms.shape, matrix=MATRIX)
 
 
-def with_voids(ms: Microstructure, fraction: float, seed: int, radius_um: float = 0.5
+def with_voids(ms: Microstructure, fraction: float, seed: int, radius_um: float = 0.4
                ) -> Microstructure:
     """Air spheres of ``radius_um`` among the particles up to ``fraction`` of the box."""
     t = ms.particles
@@ -141,22 +141,23 @@ def with_voids(ms: Microstructure, fraction: float, seed: int, radius_um: float 
     r = radius_um * 1e-6
     n = int(round(fraction * np.prod(box) / (4 / 3 * math.pi * r ** 3)))
     rng = np.random.default_rng(seed)
-    placed: list[np.ndarray] = []
-    for x in rng.uniform(0, 1, size=(400_000, 3)) * box:
+    placed = np.empty((n, 3))
+    m = 0
+    for x in rng.uniform(0, 1, size=(600_000, 3)) * box:
         d = t.centers_m - x
         d -= box * np.round(d / box)
         if np.any(np.einsum("ij,ij->i", d, d) < (t.radii_m + 1.05 * r) ** 2):
             continue
-        if placed:
-            e = np.array(placed) - x
-            e -= box * np.round(e / box)
-            if np.any(np.einsum("ij,ij->i", e, e) < (2.1 * r) ** 2):
-                continue
-        placed.append(x)
-        if len(placed) == n:
+        e = placed[:m] - x
+        e -= box * np.round(e / box)
+        if np.any(np.einsum("ij,ij->i", e, e) < (2.1 * r) ** 2):
+            continue
+        placed[m] = x
+        m += 1
+        if m == n:
             break
-    if len(placed) < n:
-        raise RuntimeError(f"voids: room for {len(placed)} of {n}")
+    if m < n:
+        raise RuntimeError(f"voids: room for {m} of {n}")
     c = np.vstack([t.centers_m, placed])
     radii = np.concatenate([t.radii_m, np.full(n, r)])
     return Microstructure.from_spheres(c, radii, list(t.material) + ["air"] * n, box,
@@ -289,10 +290,19 @@ def main(argv: list[str] | None = None) -> int:
             rows.append(score(case, d))
             print(f"{case}: {d.verdict} ({rows[-1]['winner']}); "
                   f"{'correct' if rows[-1]['correct'] else 'WRONG'}", flush=True)
-    seconds = time.perf_counter() - t0
+            write_results(out, args.size, size, rows, time.perf_counter() - t0)
+    print(f"wrote {out / 'discrepancy_truth.md'}")
+    return 0
+
+
+def write_results(out: Path, name: str, size: Size, rows: list[dict], seconds: float
+                  ) -> None:
+    """The JSON and markdown of the cases done so far (atomic: a killed run leaves the
+    last complete pair)."""
     fw = size.settings.forward
     fr = size.settings.faithful
-    summary = {"size": args.size, "formulations": list(size.formulations),
+    summary = {"size": name, "done": f"{len(rows)} of {len(size.cases)} cases",
+               "formulations": list(size.formulations),
                "workflow": {"box_um": fw.box_um, "voxel_um": fw.voxel_um,
                             "replicas": fw.replicas, "seed": fw.seed,
                             "faithful": fr.to_dict() if fr else None,
@@ -302,8 +312,9 @@ def main(argv: list[str] | None = None) -> int:
                "cases": rows, "seconds": seconds}
     write_text(out / "discrepancy_truth.json", json.dumps(summary, indent=2) + "\n")
     lines = ["# The discrepancy workflow against truths it does not share", "",
-             f"`python validation/discrepancy_truth_study.py --size {args.size}` "
-             f"({seconds:.0f} s on this machine). Workflow tables at {fw.box_um:g} um / "
+             f"`python validation/discrepancy_truth_study.py --size {name}` "
+             f"({len(rows)} of {len(size.cases)} cases, {seconds:.0f} s on this machine). "
+             f"Workflow tables at {fw.box_um:g} um / "
              f"{fw.voxel_um:g} um ({fw.replicas} replicas, seed {fw.seed})"
              + (f", faithful correction from {fr.packings} packings of "
                 f"{', '.join(f'{k} {v:g} um' for k, v in fr.boxes_um)} at {fr.voxel_um:g} "
@@ -322,8 +333,6 @@ def main(argv: list[str] | None = None) -> int:
                      f"{'yes' if r['correct'] else 'no'} |")
     lines += ["", "Statements:", ""] + [f"- {r['case']}: {r['statement']}" for r in rows]
     write_text(out / "discrepancy_truth.md", "\n".join(lines) + "\n")
-    print(f"wrote {out / 'discrepancy_truth.md'}")
-    return 0
 
 
 if __name__ == "__main__":
