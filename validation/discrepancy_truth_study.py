@@ -222,7 +222,7 @@ def truth_table(case: str, size: Size, engine: SolveEngine, seed: int) -> Measur
         comp = fractions_of(f)
         try:
             ms, mat = truth_rve(case, comp, size, TRUTH_SEED + 10 * i)
-        except RuntimeError as exc:       # a packing beyond reach (films, crowding at 65 %)
+        except (RuntimeError, ValueError) as exc:   # a packing beyond reach (films, crowding)
             print(f"{case}: {f} left out of the table: {exc}", flush=True)
             continue
         req = SolveRequest.for_materials(RVEData.of(ms), mat, 1e-8, purpose="truth",
