@@ -17,7 +17,7 @@ from ..inference.measurements import Measurements
 from .effects import Effect
 from .tables import ForwardTables, resistance_name
 
-__all__ = ["Group", "groups_of", "ModelFit", "fit_model", "profile_interval"]
+__all__ = ["Group", "groups_of", "ModelFit", "fit_model", "profile_interval", "pooled_scatter"]
 
 
 @dataclass(frozen=True)
@@ -221,6 +221,14 @@ def profile_interval(profile: np.ndarray, axis: np.ndarray, drop: float = LR_DRO
     return lo, hi
 
 
+def pooled_scatter(tables: ForwardTables, groups: Sequence[Group]) -> dict[str, float]:
+    """Per filler, the root-mean-square relative model uncertainty (RVE scatter and faithful
+    correction) of the formulations of ``groups``."""
+    return {fl: math.sqrt(np.mean([tables.relative_sd(g.formulation) ** 2
+                                   for g in groups if g.filler == fl]))
+            for fl in sorted({g.filler for g in groups})}
+
+
 def _fraction_slopes(where: dict[str, tuple[str, float]], k: dict[str, np.ndarray]
                      ) -> dict[str, np.ndarray]:
     """``d ln k / d phi`` of the model at each formulation over the resistance axis: per
@@ -249,8 +257,7 @@ def fit_model(tables: ForwardTables, groups: Sequence[Group], effect: Effect | N
     fine_r = np.linspace(logr[0], logr[-1], st.fine_points)
     fine_t = _fine_axis(effect, 41)
     fillers = sorted({g.filler for g in groups})
-    scatter = {fl: math.sqrt(np.mean([tables.relative_sd(g.formulation) ** 2
-                                      for g in groups if g.filler == fl])) for fl in fillers}
+    scatter = pooled_scatter(tables, groups)
     kmesh = {}
 
     def model_k(g: Group, i=slice(None), j=slice(None)) -> np.ndarray:

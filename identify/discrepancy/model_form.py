@@ -34,7 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import special
 
-from .fit import Group, _interp
+from .fit import Group, _interp, pooled_scatter
 from .tables import ForwardTables, resistance_name
 
 __all__ = ["AMPLITUDE_RANGE", "LENGTH_RANGE", "ModelFormFit", "fit_model_form",
@@ -80,8 +80,7 @@ def _data(tables: ForwardTables, groups: Sequence[Group]) -> _Data:
     logr = np.log10(np.asarray(st.r_grid_m2K_per_W))
     fine = np.linspace(logr[0], logr[-1], st.fine_points)
     fillers = sorted({g.filler for g in groups})
-    scatter = {fl: math.sqrt(np.mean([tables.relative_sd(g.formulation) ** 2
-                                      for g in groups if g.filler == fl])) for fl in fillers}
+    scatter = pooled_scatter(tables, groups)
     curves = {}
     for g in groups:
         if g.formulation not in curves:
