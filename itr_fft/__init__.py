@@ -5,9 +5,13 @@ Public API::
     import itr_fft
     res = itr_fft.homogenize(ms, mat, tol=1e-8)       # same signature/result as itr_fv
 
-Importing the package registers two backends of :func:`itr_fv.solve.homogenize`:
-``"itr_fft"`` (:mod:`itr_fft.numba_backend`, fused numba kernels, the fast one) and
-``"scipy_fft"`` (:mod:`itr_fft.scipy_backend`, plain numpy/scipy). This package imports the
+Importing the package registers three backends of :func:`itr_fv.solve.homogenize`:
+``"itr_fft"`` (:mod:`itr_fft.numba_backend`, fused numba kernels, the fast one on a CPU;
+its preconditioner is the FFT Laplacian inverse or, with ``preconditioner="multigrid"``,
+particle deflation around an aggregation multigrid, :mod:`itr_fft.multigrid`,
+:mod:`itr_fft.deflation`), ``"array_api"`` (:mod:`itr_fft.array_api_backend`, the same
+FFT-PCG written once against the array API standard: NumPy, CuPy or PyTorch arrays, CPU or
+GPU) and ``"scipy_fft"`` (:mod:`itr_fft.scipy_backend`, plain numpy/scipy). This package imports the
 discrete problem, the driver and CG from ``itr_fv``, never its solver.
 
 Importing the package sets ``OMP_WAIT_POLICY=PASSIVE`` unless the caller set it: numba's
@@ -20,8 +24,10 @@ import os as _os
 
 _os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
+from .array_api_backend import ArrayAPIBackend, resolve_device
 from .numba_backend import (
     FLOAT32_MIN_TOL,
+    PRECONDITIONERS,
     NumbaFFTBackend,
     float32_min_tol,
     reference_conductance,
@@ -30,4 +36,5 @@ from .scipy_backend import ScipyFFTBackend
 from .solver import homogenize
 
 __all__ = ["homogenize", "reference_conductance", "FLOAT32_MIN_TOL", "float32_min_tol",
-           "NumbaFFTBackend", "ScipyFFTBackend"]
+           "NumbaFFTBackend", "ScipyFFTBackend", "ArrayAPIBackend", "resolve_device",
+           "PRECONDITIONERS"]

@@ -41,8 +41,12 @@ from itr_fv.krylov import ArrayOps, conjugate_gradients
 from itr_fv.problem import DiscreteSystem
 
 from . import _kernels as K
+from . import _mg_kernels as MG
+from .deflation import ParticleDeflation
+from .multigrid import MG_BYTES_PER_VOXEL, AggregationMultigrid
 
 __all__ = ["NumbaFFTBackend", "reference_conductance", "FLOAT32_MIN_TOL", "float32_min_tol",
+           "choose_preconditioner", "AUTO_CONTRAST", "PRECONDITIONERS",
            "FFT_BYTES_PER_VOXEL"]
 
 #: Measured peak bytes per voxel, float64 or float32 vectors (module docstring), rounded up.
@@ -62,6 +66,37 @@ def float32_min_tol(shape: Sequence[int]) -> float:
     (n the largest grid dimension), keeps a margin of ~2x above the stall.
     """
     return max(FLOAT32_MIN_TOL, 2.5e-10 * float(max(shape)) ** 2)
+
+def check_float32_tol(dtype: np.dtype, shape: Sequence[int], tol: float) -> None:
+    """Raise ValueError when float32 vectors cannot reach ``tol`` on this grid."""
+    if dtype == np.float32 and tol < float32_min_tol(shape):
+        raise ValueError(f"tol: {tol:.1e} is below what float32 vectors can reach on "
+                         f"this grid ({float32_min_tol(shape):.1e}); use "
+                         "dtype=numpy.float64")
+
+
+#: Preconditioners of :class:`NumbaFFTBackend`: the FFT Laplacian inverse, particle
+#: deflation around an aggregation-multigrid V-cycle (:mod:`itr_fft.multigrid`,
+#: :mod:`itr_fft.deflation`) for high contrast and resistive interfaces, and the choice
+#: between them by :func:`choose_preconditioner`.
+PRECONDITIONERS = ("auto", "fft", "multigrid")
+
+#: Bulk conductivity contrast from which ``"auto"`` takes the multigrid. Measured at 128^3
+#: (validation/results/bench_preconditioners.md): at contrast 167 (Al2O3/silicone) the two
+#: cost the same (dense 60 %) or the FFT wins (30 % spheres); at ~1100 (AlN/silicone, the
+#: hybrids) the multigrid needs 5x fewer iterations and 2.6x less time.
+AUTO_CONTRAST = 500.0
+
+
+def choose_preconditioner(system: DiscreteSystem) -> str:
+    """``"multigrid"`` where the bulk conductivity contrast (largest over smallest
+    conductance of a face inside a particle or inside the matrix) reaches
+    :data:`AUTO_CONTRAST` and the particles are known, else ``"fft"``."""
+    ids = system.particle_ids
+    if ids is None or not ids.any():
+        return "fft"
+    lo, hi = MG.bulk_range(system.g, np.ascontiguousarray(ids, dtype=np.int32))
+    return "multigrid" if np.isfinite(lo) and hi >= AUTO_CONTRAST * lo else "fft"
 
 #: Grids with fewer voxels than this run single-threaded by default.
 SERIAL_BELOW = 40 ** 3
@@ -135,6 +170,38 @@ class _Preconditioner:
         return self.apply_dot(r)[0]
 
 
+class _MultigridPreconditioner:
+    """Particle deflation around an aggregation-multigrid V-cycle, then cluster means out."""
+
+    #: With deflation, ``apply`` returns the same array every call (see the CG).
+    reuses_output = True
+
+    def __init__(self, system: DiscreteSystem, labels_flat: np.ndarray | None,
+                 counts: np.ndarray | None) -> None:
+        ids = system.particle_ids
+        self.multigrid = AggregationMultigrid(system.g, ids)
+        self.deflation = (ParticleDeflation(system.g, ids, self.multigrid)
+                          if ids is not None and ids.any() else None)
+        self.labels_flat = labels_flat
+        self.counts = counts
+
+    def apply_dot(self, r: np.ndarray) -> tuple[np.ndarray, float]:
+        if self.deflation is not None:
+            z, rz = self.deflation.apply_dot(r)
+        else:
+            z = self.multigrid.apply(r).astype(np.float64)
+            rz = K.dot(np.ascontiguousarray(r, dtype=np.float64), z)
+        if self.labels_flat is not None:
+            K.project_clusters(z, self.labels_flat, self.counts)
+            # r . z again: r's cluster sums are round-off, not zero, and z's cluster
+            # constants before the projection were large
+            rz = K.dot(np.ascontiguousarray(r, dtype=np.float64), z)
+        return z, rz
+
+    def apply(self, r: np.ndarray) -> np.ndarray:
+        return self.apply_dot(r)[0]
+
+
 class _StencilOperator:
     """The 7-point operator of the face conductances g, matrix-free (fused numba stencil)."""
 
@@ -179,12 +246,26 @@ class _PreparedFFT(PreparedSystem):
         g_ref = reference_conductance(g, backend.reference)
         fdt = backend.dtype if backend.dtype == np.float32 else backend.fft_dtype
         self.operator = _StencilOperator(g)
-        self.preconditioner = _Preconditioner(shape, g_ref, self.workers, self.labels_flat,
-                                              self.counts, fdt)
         self._old_threads = numba.get_num_threads()
         numba.set_num_threads(self.workers)
+        kind = backend.preconditioner
+        if kind == "auto":
+            kind = choose_preconditioner(system)
+        self.kind = kind
+        if kind == "multigrid":
+            self.preconditioner = _MultigridPreconditioner(system, self.labels_flat,
+                                                           self.counts)
+        else:
+            self.preconditioner = _Preconditioner(shape, g_ref, self.workers,
+                                                  self.labels_flat, self.counts, fdt)
         self.info = {"g_ref": g_ref, "k_ref": g_ref * voxel_m, "dtype": self.dtype.name,
-                     "fft_dtype": fdt.name, "workers": self.workers}
+                     "fft_dtype": fdt.name, "workers": self.workers,
+                     "preconditioner": kind}
+        if kind == "multigrid":
+            pre = self.preconditioner
+            self.info["levels"] = pre.multigrid.n_levels
+            self.info["deflated_groups"] = (0 if pre.deflation is None
+                                            else pre.deflation.n_groups)
 
     def _project(self, v: np.ndarray) -> None:
         K.project_clusters(v, self.labels_flat, self.counts)
@@ -203,7 +284,8 @@ class _PreparedFFT(PreparedSystem):
         numba.set_num_threads(self._old_threads)
 
 
-def _float_dtype(value: Any, name: str) -> np.dtype:
+def float_dtype(value: Any, name: str) -> np.dtype:
+    """``value`` as numpy.float64 or numpy.float32; ValueError naming ``name`` otherwise."""
     try:
         dt = np.dtype(value)
     except TypeError:
@@ -237,15 +319,28 @@ class NumbaFFTBackend(Backend):
         vectors, the operator, the residual check and hence the converged answer in
         ``dtype``, gives the same iteration counts (measured to tol = 1e-10) and costs
         2.6x less FFT time at 128^3. Use float64 to apply it to double precision.
+    preconditioner : {"auto", "fft", "multigrid"}
+        ``"auto"`` (default): :func:`choose_preconditioner` picks one per system, by the
+        bulk conductivity contrast. ``"fft"``: the exact inverse of the constant-coefficient
+        Laplacian (one FFT pair per iteration; its iterations grow with the conductivity
+        contrast and with resistive interfaces under refinement). ``"multigrid"``: particle deflation
+        (:mod:`itr_fft.deflation`) around an aggregation-multigrid V-cycle whose aggregates
+        stop at resistive interfaces (:mod:`itr_fft.multigrid`), in float32; measured in
+        ``validation/results/bench_preconditioners.md``.
     """
 
     name = "itr_fft"
     default_maxiter = 3000
 
     def __init__(self, dtype: Any = np.float64, workers: int | None = None,
-                 reference: str | float = "geometric", fft_dtype: Any = np.float32) -> None:
-        self.dtype = _float_dtype(dtype, "dtype")
-        self.fft_dtype = _float_dtype(fft_dtype, "fft_dtype")
+                 reference: str | float = "geometric", fft_dtype: Any = np.float32,
+                 preconditioner: str = "auto") -> None:
+        if preconditioner not in PRECONDITIONERS:
+            raise ValueError(f"preconditioner: expected one of {PRECONDITIONERS}, got "
+                             f"{preconditioner!r}")
+        self.preconditioner = preconditioner
+        self.dtype = float_dtype(dtype, "dtype")
+        self.fft_dtype = float_dtype(fft_dtype, "fft_dtype")
         if workers is not None and (isinstance(workers, bool) or
                                     not isinstance(workers, (int, np.integer)) or workers < 1):
             raise ValueError(f"workers: expected a positive integer, got {workers!r}")
@@ -259,17 +354,18 @@ class NumbaFFTBackend(Backend):
         self.reference = reference
 
     def bytes_per_voxel(self) -> int:
+        if self.preconditioner != "fft":  # "auto" may take the multigrid
+            return FFT_BYTES_PER_VOXEL + MG_BYTES_PER_VOXEL
         return FFT_BYTES_PER_VOXEL
 
     def options(self) -> dict[str, Any]:
-        return {"dtype": self.dtype.name, "workers": self.workers,
+        opts = {"dtype": self.dtype.name, "workers": self.workers,
                 "reference": self.reference, "fft_dtype": self.fft_dtype.name}
+        opts["preconditioner"] = self.preconditioner
+        return opts
 
     def check(self, shape: tuple[int, int, int], tol: float) -> None:
-        if self.dtype == np.float32 and tol < float32_min_tol(shape):
-            raise ValueError(f"tol: {tol:.1e} is below what float32 vectors can reach on "
-                             f"this grid ({float32_min_tol(shape):.1e}); use "
-                             "dtype=numpy.float64")
+        check_float32_tol(self.dtype, shape, tol)
 
     def threads_for(self, shape: Sequence[int]) -> int:
         """Threads used on this grid (threads do not pay below ~40^3 voxels)."""

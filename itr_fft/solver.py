@@ -26,12 +26,13 @@ def homogenize(ms: Microstructure | DiscreteProblem, mat: Materials, tol: float 
                x0: np.ndarray | None = None, strict: bool = True, store_fields: bool = True,
                geometry: FaceGeometry | None = None, *, dtype: type = np.float64,
                workers: int | None = None, reference: str | float = "geometric",
-               fft_dtype: type = np.float32, check_memory: bool = True) -> HomogenizationResult:
+               fft_dtype: type = np.float32, check_memory: bool = True,
+               preconditioner: str = "auto") -> HomogenizationResult:
     """Effective conductivity tensor by FFT-preconditioned CG (same system as itr_fv).
 
     The same as :func:`itr_fv.solve.homogenize` with
-    ``backend=NumbaFFTBackend(dtype, workers, reference, fft_dtype)``; the options are those
-    of :class:`~itr_fft.numba_backend.NumbaFFTBackend`.
+    ``backend=NumbaFFTBackend(dtype, workers, reference, fft_dtype, preconditioner)``; the
+    options are those of :class:`~itr_fft.numba_backend.NumbaFFTBackend`.
 
     Parameters
     ----------
@@ -61,9 +62,10 @@ def homogenize(ms: Microstructure | DiscreteProblem, mat: Materials, tol: float 
         Keep temperature, theta and face fluxes in the result.
     geometry : FaceGeometry, optional
         Precomputed ``face_geometry(ms, staircase)`` to reuse across parameter sets.
-    dtype, workers, reference, fft_dtype
+    dtype, workers, reference, fft_dtype, preconditioner
         Options of :class:`~itr_fft.numba_backend.NumbaFFTBackend` (vector precision,
-        threads, reference conductance of the preconditioner, FFT precision).
+        threads, reference conductance of the FFT preconditioner, FFT precision, and the
+        preconditioner: ``"auto"``, ``"fft"`` or ``"multigrid"``).
     check_memory : bool
         Estimate the peak memory first (:mod:`itr_fv.resources`) and raise
         :class:`~itr_fv.resources.InsufficientMemoryError` if it exceeds the available
@@ -77,7 +79,7 @@ def homogenize(ms: Microstructure | DiscreteProblem, mat: Materials, tol: float 
         model) and face counts.
     """
     backend = NumbaFFTBackend(dtype=dtype, workers=workers, reference=reference,
-                              fft_dtype=fft_dtype)
+                              fft_dtype=fft_dtype, preconditioner=preconditioner)
     return _drive(ms, mat, backend=backend, tol=tol, maxiter=maxiter, directions=directions,
                   x0=x0, callback=callback, strict=strict, store_fields=store_fields,
                   check_memory=check_memory, staircase=staircase, geometry=geometry)

@@ -5,7 +5,8 @@
 - an operator with ``apply(x, out)`` (``out = A x``) and, optionally, a fused
   ``apply_dot(x, out)`` that also returns ``x . out``;
 - a preconditioner with ``apply(r)`` returning ``z ~ A^-1 r`` and, optionally, a fused
-  ``apply_dot(r)`` returning ``(z, r . z)``;
+  ``apply_dot(r)`` returning ``(z, r . z)``; one that returns the same work array every
+  call says so with ``reuses_output = True`` (CG then copies z where it keeps it);
 - vector operations (:class:`ArrayOps`: array expressions; a backend may pass fused kernels
   with the same methods).
 
@@ -80,6 +81,14 @@ class ArrayOps:
 
     def is_zero(self, x: np.ndarray) -> bool:
         return not np.any(x)
+
+    def like(self, z: np.ndarray, x: np.ndarray) -> np.ndarray:
+        """``z`` in the precision of ``x`` (itself when it already is)."""
+        return z if z.dtype == x.dtype else z.astype(x.dtype)
+
+    def empty_like(self, x: np.ndarray) -> np.ndarray:
+        """A work vector of the shape and precision of ``x``."""
+        return np.empty_like(x)
 
 
 class CGOutcome:
@@ -159,8 +168,8 @@ def conjugate_gradients(operator: Any, b: Any, x: Any, *, tol: float, maxiter: i
         ops.scale(x, 0.0)
         history.append(0.0)
         return CGOutcome(0, history, 0.0, 0)
-    r = np.empty_like(x) if isinstance(x, np.ndarray) else x * 0
-    q = np.empty_like(x) if isinstance(x, np.ndarray) else x * 0
+    r = ops.empty_like(x)
+    q = ops.empty_like(x)
     if not ops.is_zero(x):
         xax = _apply_dot(operator, x, q, ops)
         if xax > 0.0:
@@ -172,7 +181,9 @@ def conjugate_gradients(operator: Any, b: Any, x: Any, *, tol: float, maxiter: i
         if project is not None:
             project(r)
         z, rz = _precondition(preconditioner, r, ops)
-        p = z.astype(x.dtype) if z.dtype != x.dtype else z  # p keeps the CG precision
+        p = ops.like(z, x)  # p keeps the CG precision
+        if p is z and getattr(preconditioner, "reuses_output", False):
+            p = p.copy()  # the preconditioner writes its next z into the same array
         del z
         rec = true_res
         while it < maxiter:

@@ -46,11 +46,16 @@ class DiscreteSystem:
         Clusters cut off by insulating faces.
     labels : ndarray of int32 or None
         Connected component of every voxel (None when the grid is connected).
+    particle_ids : ndarray of int32 or None
+        Particle of every voxel, 0 = matrix (the microstructure's own array, not a copy):
+        the groups whose constants are the slow modes of a resistive-interface system,
+        which a preconditioner may deflate. None when unknown.
     """
 
     g: np.ndarray
     floating: FloatingClusters
     labels: np.ndarray | None
+    particle_ids: np.ndarray | None = None
 
 
 def floating_clusters(g: np.ndarray) -> tuple[FloatingClusters, np.ndarray | None]:
@@ -141,7 +146,7 @@ class DiscreteProblem:
                 "under refinement.", VoxelContactWarning, stacklevel=4)
         g = self.geometry.conductances(mat)
         floating, labels = floating_clusters(g)
-        return DiscreteSystem(g, floating, labels)
+        return DiscreteSystem(g, floating, labels, self.microstructure.particle_ids)
 
     def _warn_scale(self, mat: Materials) -> None:
         h = self.voxel_m

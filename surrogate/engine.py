@@ -42,7 +42,7 @@ from itr_fv.materials import Materials
 from itr_fv.microstructure import Microstructure
 from itr_fv.problem import DiscreteProblem
 
-from .solver_choice import check_solver, solver_backend
+from .solver_choice import check_solver, solver_backend, worker_resources
 from .store import rve_id, tensor_columns, tensor_of
 
 __all__ = ["RVEData", "SolveRequest", "SolveResult", "SolveStore", "SolveEngine",
@@ -532,7 +532,8 @@ class SolveEngine:
                 raise ValueError(f"--scheduler: no worker joined {self.scheduler!r} within "
                                  "60 s; start workers with 'dask worker ADDRESS'") from None
         futures = {client.submit(_run_payload, _payload(req), key=f"itr-solve-{key}",
-                                 pure=False): key for key, req in requests.items()}
+                                 pure=False, resources=worker_resources(req.solver)): key
+                   for key, req in requests.items()}
         for fut in as_completed(futures):
             d = fut.result()
             yield futures[fut], SolveResult(

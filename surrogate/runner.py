@@ -218,8 +218,12 @@ def _execute(client, campaign: Campaign, todo: list[Task], store: CampaignStore,
 
     spec = campaign.to_dict()
     prefix = f"itr-{campaign.fingerprint()[:8]}-"
+    from .solver_choice import worker_resources
+
+    resources = worker_resources(campaign.solver)
     futures = [client.submit(run_task, spec, _task_dict(t), str(store.folder),
-                             key=prefix + t.task_id, pure=False) for t in todo]
+                             key=prefix + t.task_id, pure=False, resources=resources)
+               for t in todo]
     failed = solves = 0
     with tqdm(total=len(todo), unit="task", disable=not progress, desc=campaign.name) as bar:
         for fut in as_completed(futures):

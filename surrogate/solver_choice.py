@@ -1,9 +1,13 @@
 """The one place where a solver is chosen: campaign files, the reduced basis, identification
 and the command line name a solver here, and get a backend of :mod:`itr_fv.backends`.
 
-A choice is ``"fft"`` (the numba FFT-PCG backend ``itr_fft``), ``"fv"`` (the pyamg
+A choice is ``"fft"`` (the numba FFT-PCG backend ``itr_fft``), ``"mg"`` (the same backend
+with the particle-deflated multigrid preconditioner, for high contrast and resistive
+interfaces), ``"gpu"`` (the array-API backend on a CUDA device), ``"fv"`` (the pyamg
 reference ``itr_fv``), ``"auto"`` (the cheaper one for the grid), or the name of any
 registered backend (``itr_fv.backends.available_backends()``, e.g. ``"scipy_fft"``).
+A choice that runs on a GPU asks the campaign engine's Dask workers for the resource
+``GPU`` (:func:`worker_resources`; start such workers with ``--resources GPU=1``).
 
 Measured (validation/results/crossval.md, bench_solvers.md; shared 2-core machine):
 itr_fft was faster than itr_fv at every size tried -- 24^3 (0.1-0.3 s vs 0.6-20 s),
@@ -24,12 +28,14 @@ from itr_fv.backends import Backend, available_backends, backend_for
 from itr_fv.solve import homogenize
 
 __all__ = ["choose_solver", "check_solver", "solver_backend", "homogenize_auto",
-           "CROSSOVER_VOXELS", "SOLVER_CHOICES"]
+           "worker_resources", "CROSSOVER_VOXELS", "SOLVER_CHOICES"]
 
 #: Grids with fewer voxels than this are solved by itr_fv (measured: none, see above).
 CROSSOVER_VOXELS = 0
-#: Short names accepted besides the registered backend names.
-SOLVER_CHOICES = {"fft": "itr_fft", "fv": "itr_fv"}
+#: Short names accepted besides the registered backend names: (backend, its options).
+SOLVER_CHOICES = {"fft": ("itr_fft", {}), "fv": ("itr_fv", {}),
+                  "mg": ("itr_fft", {"preconditioner": "multigrid"}),
+                  "gpu": ("array_api", {"device": "cuda"})}
 
 
 def choose_solver(shape: int | Sequence[int]) -> str:
@@ -62,10 +68,21 @@ def solver_backend(choice: str, shape: int | Sequence[int], *,
         Threads of the numba FFT backend (None: its default for the grid).
     """
     choice = check_solver(choice)
-    name = choose_solver(shape) if choice == "auto" else SOLVER_CHOICES.get(choice, choice)
+    if choice == "auto":
+        name, options = choose_solver(shape), {}
+    else:
+        name, options = SOLVER_CHOICES.get(choice, (choice, {}))
     if name == "itr_fft" and threads is not None:
-        return backend_for(name, workers=threads)
-    return backend_for(name)
+        options = {**options, "workers": threads}
+    return backend_for(name, **options)
+
+
+def worker_resources(choice: str) -> dict[str, int] | None:
+    """Dask worker resources a solve of this choice needs: ``{"GPU": 1}`` for a choice that
+    runs on a GPU (``"gpu"``), else None (any worker)."""
+    choice = check_solver(choice)
+    name, options = SOLVER_CHOICES.get(choice, (choice, {}))
+    return {"GPU": 1} if options.get("device") == "cuda" else None
 
 
 def homogenize_auto(ms, mat, **kwargs):
