@@ -173,33 +173,29 @@ def coarse_operator(g, s, member, c_shape):  # pragma: no cover - compiled
                     kp = k + 1 if k < n3 - 1 else 0
                     K = k >> 1
                     dsum = float(s[i, j, k])
-                    # +e_d faces: to a member of another box -> coarse face, else excess
-                    for d in range(3):
-                        if d == 0:
+                    # a face to a member of another box is part of a coarse face (counted
+                    # in gc by the lower box, t even) and of the diagonal; a face to a
+                    # non-member is the excess
+                    for t in range(6):
+                        d = t >> 1
+                        if t == 0:
                             qi, qj, qk, w = ip, j, k, g[0, i, j, k]
-                        elif d == 1:
-                            qi, qj, qk, w = i, jp, k, g[1, i, j, k]
-                        else:
-                            qi, qj, qk, w = i, j, kp, g[2, i, j, k]
-                        if _member(member, qi, qj, qk):
-                            if (qi >> 1) != ci or (qj >> 1) != J or (qk >> 1) != K:
-                                gc[d, ci, J, K] += w
-                                dsum += w
-                        else:
-                            dsum += w
-                    # -e_d faces: the coarse face is counted by the lower box
-                    for d in range(3):
-                        if d == 0:
+                        elif t == 1:
                             qi, qj, qk, w = im, j, k, g[0, im, j, k]
-                        elif d == 1:
+                        elif t == 2:
+                            qi, qj, qk, w = i, jp, k, g[1, i, j, k]
+                        elif t == 3:
                             qi, qj, qk, w = i, jm, k, g[1, i, jm, k]
+                        elif t == 4:
+                            qi, qj, qk, w = i, j, kp, g[2, i, j, k]
                         else:
                             qi, qj, qk, w = i, j, km, g[2, i, j, km]
-                        if _member(member, qi, qj, qk):
-                            if (qi >> 1) != ci or (qj >> 1) != J or (qk >> 1) != K:
-                                dsum += w
-                        else:
+                        if not _member(member, qi, qj, qk):
                             dsum += w
+                        elif (qi >> 1) != ci or (qj >> 1) != J or (qk >> 1) != K:
+                            dsum += w
+                            if t % 2 == 0:
+                                gc[d, ci, J, K] += w
                     diag[ci, J, K] += dsum
     sc = np.empty((c1, c2, c3))
     for ci in nb.prange(c1):

@@ -323,9 +323,10 @@ class NumbaFFTBackend(Backend):
         ``"auto"`` (default): :func:`choose_preconditioner` picks one per system, by the
         bulk conductivity contrast. ``"fft"``: the exact inverse of the constant-coefficient
         Laplacian (one FFT pair per iteration; its iterations grow with the conductivity
-        contrast and with resistive interfaces under refinement). ``"multigrid"``: particle deflation
-        (:mod:`itr_fft.deflation`) around an aggregation-multigrid V-cycle whose aggregates
-        stop at resistive interfaces (:mod:`itr_fft.multigrid`), in float32; measured in
+        contrast and with resistive interfaces under refinement). ``"multigrid"``: particle
+        deflation (:mod:`itr_fft.deflation`) around an aggregation-multigrid V-cycle whose
+        aggregates stop at resistive interfaces (:mod:`itr_fft.multigrid`), in float32;
+        measured in
         ``validation/results/bench_preconditioners.md``.
     """
 
