@@ -51,7 +51,7 @@ def test_request_keys_follow_parameters_tolerance_and_solver(rves):
     assert a.key != SolveRequest.for_materials(
         rve, MAT.with_parameters({"R_Al2O3_silicone": 2.1e-8}), 1e-8).key
     with pytest.raises(ValueError, match="solver"):
-        SolveRequest.for_materials(rve, MAT, 1e-8, solver="gpu")
+        SolveRequest.for_materials(rve, MAT, 1e-8, solver="quantum")
 
 
 def test_serial_results_are_the_solver_and_a_rerun_reuses_every_solve(rves, tmp_path):
@@ -123,3 +123,29 @@ def test_worker_limit_keeps_a_measured_250_cubed_worker_below_the_pause_mark():
     assert 2 * worker_memory(camp) < 24 * 2**30
     # a small task keeps the base of the interpreter and libraries
     assert eng.worker_memory_limit(0) >= eng.WORKER_BASE_BYTES / 0.8
+
+
+def test_gpu_solves_go_only_to_workers_that_declare_a_gpu(rves):
+    """A ``solver="gpu"`` request asks the scheduler for the worker resource GPU: a cluster
+    whose worker declares none holds it back; a worker that declares one runs it (here,
+    with no GPU in the machine, to the array-API backend's own clear error)."""
+    from dask.distributed import Client, LocalCluster
+
+    from itr_surrogate.solver_choice import worker_resources
+
+    req = SolveRequest.for_materials(rves[0][1], MAT, 1e-8, solver="gpu")
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
+                      dashboard_address=None) as plain, Client(plain) as client:
+        fut = client.submit(eng._run_payload, eng._payload(req), pure=False,
+                            resources=worker_resources("gpu"))
+        with pytest.raises(TimeoutError):
+            fut.result(timeout=3)  # no worker may take it
+        assert fut.status == "pending"
+        fut.cancel()
+    if itr_fft.array_api_backend._cuda_available() is not None:
+        pytest.skip("this machine has a GPU: the worker would solve, not fail")
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
+                      dashboard_address=None, resources={"GPU": 1}) as gpu:
+        with SolveEngine(scheduler=gpu.scheduler_address, echo=lambda s: None) as engine:
+            with pytest.raises(ValueError, match="device: 'cuda'"):
+                engine.solve([req])

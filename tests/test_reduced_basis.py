@@ -147,7 +147,7 @@ def test_bad_bounds_name_the_argument(problem, materials, bounds, match):
 
 
 @pytest.mark.parametrize("kwargs,match", [
-    ({"tol": 0.0}, "tol"), ({"max_solves": 0}, "max_solves"), ({"solver": "gpu"}, "solver"),
+    ({"tol": 0.0}, "tol"), ({"max_solves": 0}, "max_solves"), ({"solver": "quantum"}, "solver"),
     ({"n_train": 2.5}, "n_train"),
 ])
 def test_bad_settings_name_the_argument(problem, materials, kwargs, match):

@@ -64,7 +64,7 @@ def _run_contact(size: str, names: list[str] | None, contact: str) -> list[dict]
         t = time.perf_counter()
         ms, mat = _materials(case.name, size, contact)
         t_build = time.perf_counter() - t
-        fft = itr_fft.homogenize(ms, mat, tol=TOL, store_fields=False)
+        fft = itr_fft.homogenize(ms, mat, tol=TOL, store_fields=False, preconditioner="fft")
         mg = itr_fft.homogenize(ms, mat, tol=TOL, store_fields=False,
                                 preconditioner="multigrid")
         fv = itr_fv.homogenize(ms, mat, tol=TOL, store_fields=False)
