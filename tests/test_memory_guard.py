@@ -6,6 +6,7 @@ from conftest import sc_sphere
 
 import itr_fft
 import itr_fv
+from itr_fft.multigrid import MG_BYTES_PER_VOXEL
 from itr_fft.numba_backend import FFT_BYTES_PER_VOXEL
 from itr_fv import Materials, resources
 from itr_fv.amg_backend import AMG_BYTES_PER_VOXEL
@@ -16,19 +17,24 @@ MAT = Materials({"matrix": 1.0, "filler": 10.0}, {("filler", "matrix"): 0.05}, "
 
 def test_estimates_scale_with_voxels_and_rank_the_solvers():
     fv = estimate_peak_memory((400, 400, 400), "itr_fv", store_fields=False)
-    f64 = estimate_peak_memory((400, 400, 400), "itr_fft", store_fields=False)
+    f64 = estimate_peak_memory((400, 400, 400), itr_fft.NumbaFFTBackend(preconditioner="fft"),
+                               store_fields=False)
     f32 = estimate_peak_memory((400, 400, 400), "itr_fft", dtype="float32", store_fields=False)
     assert fv == 400**3 * AMG_BYTES_PER_VOXEL
-    assert fv > 10 * f64 and f32 <= f64
+    assert fv > 10 * f64 and f32 <= estimate_peak_memory((400, 400, 400), "itr_fft",
+                                                         store_fields=False)
+    # the multigrid (which "auto" may take) holds its hierarchy on top
+    mg = estimate_peak_memory((400, 400, 400), "itr_fft", store_fields=False)
+    assert mg == 400**3 * (FFT_BYTES_PER_VOXEL + MG_BYTES_PER_VOXEL) > f64
     # the 400^3 FV solve that died at 7.6 GB in assemble_operator is estimated far above that
     assert fv > 60e9
     fields = estimate_peak_memory((400, 400, 400), "itr_fft", store_fields=True, load_cases=3)
-    assert fields - f64 == 400**3 * 3 * resources.FIELD_BYTES_PER_VOXEL_CASE
+    assert fields - mg == 400**3 * 3 * resources.FIELD_BYTES_PER_VOXEL_CASE
     with pytest.raises(ValueError, match="solver.*unknown 'itr_gpu'"):
         estimate_peak_memory((8, 8, 8), "itr_gpu")
     # a configured backend object gives its own cost
-    assert estimate_peak_memory((10, 10, 10), itr_fft.NumbaFFTBackend(dtype=np.float32),
-                                store_fields=False) == 1000 * FFT_BYTES_PER_VOXEL
+    assert estimate_peak_memory((10, 10, 10), itr_fft.NumbaFFTBackend(
+        dtype=np.float32, preconditioner="fft"), store_fields=False) == 1000 * FFT_BYTES_PER_VOXEL
 
 
 def test_refusal_names_estimate_available_and_what_would_fit():
@@ -36,7 +42,8 @@ def test_refusal_names_estimate_available_and_what_would_fit():
         check_memory((400, 400, 400), "itr_fv", store_fields=False, available=24 * 10**9)
     msg = str(info.value)
     assert "400x400x400" in msg and "80.0 GB" in msg and "24.0 GB" in msg
-    assert "itr_fft with dtype=float64" in msg and "check_memory=False" in msg
+    # the cheapest backend that fits is named: plain numpy/scipy FFT-PCG, 136 B per voxel
+    assert "would fit: scipy_fft" in msg and "8.7 GB" in msg and "check_memory=False" in msg
     assert msg.startswith("memory: itr_fv on a 400x400x400 grid")
     assert info.value.estimate > info.value.available
     # nothing fits: say so
