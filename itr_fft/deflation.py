@@ -64,19 +64,15 @@ class ParticleDeflation:
     inner : object with ``apply(r)``
         Symmetric positive preconditioner of the same operator (returns an array of r's
         shape).
-    g_work : ndarray, optional
-        The conductances in the precision of the passes (default ``g``); the multigrid's
-        finest level has them (:attr:`AggregationMultigrid.fine_conductances`).
     """
 
     #: ``apply`` returns the same array every call (CG copies it where it keeps it).
     reuses_output = True
 
-    def __init__(self, g: np.ndarray, groups: np.ndarray, inner: Any,
-                 g_work: np.ndarray | None = None) -> None:
+    def __init__(self, g: np.ndarray, groups: np.ndarray, inner: Any) -> None:
         if groups.shape != g.shape[1:]:
             raise ValueError(f"groups: expected shape {g.shape[1:]}, got {groups.shape}")
-        self.g = g if g_work is None else g_work
+        self.g = g
         self.groups = np.ascontiguousarray(groups, dtype=np.int32)
         self.n_groups = int(self.groups.max()) + 1 if self.groups.size else 1
         e = group_operator(g, self.groups, self.n_groups)

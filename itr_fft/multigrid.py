@@ -101,6 +101,10 @@ class AggregationMultigrid:
     dtype : numpy float dtype
         Precision of the hierarchy and the cycle (float32 halves its memory traffic; it is
         a preconditioner, CG keeps its own precision).
+    theta : float
+        A face between groups is strong (its cells may share an aggregate) when its
+        conductance is at least ``theta`` times the smaller bulk conductance of its two
+        cells (:func:`itr_fft._mg_kernels.memberships`).
     """
 
     def __init__(self, g: np.ndarray, groups: np.ndarray | None = None, *, sweeps: int = 2,
@@ -144,18 +148,11 @@ class AggregationMultigrid:
         self.coarse_shape = tuple(gl.shape[1:])
         self.coarse_inverse = np.linalg.pinv(_dense_operator(gl, sl), hermitian=True)
         self._input = np.empty(0, dtype=self.dtype)  # r in the hierarchy's precision
-        self._fine_g = (self.levels[0].g if self.levels
-                        else np.ascontiguousarray(g, dtype=self.dtype))
 
     @property
     def n_levels(self) -> int:
         """Levels including the coarsest."""
         return len(self.levels) + 1
-
-    @property
-    def fine_conductances(self) -> np.ndarray:
-        """The finest level's face conductances in the hierarchy's precision."""
-        return self._fine_g
 
     def _cycle(self, level: int, b: np.ndarray) -> np.ndarray:
         """M_level b, in one of the level's work arrays (valid until the next cycle)."""

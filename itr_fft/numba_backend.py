@@ -67,6 +67,7 @@ def float32_min_tol(shape: Sequence[int]) -> float:
     """
     return max(FLOAT32_MIN_TOL, 2.5e-10 * float(max(shape)) ** 2)
 
+
 def check_float32_tol(dtype: np.dtype, shape: Sequence[int], tol: float,
                       factor: float = 1.0) -> None:
     """Raise ValueError when float32 vectors cannot reach ``tol`` on this grid (below
@@ -100,6 +101,7 @@ def choose_preconditioner(system: DiscreteSystem) -> str:
         return "fft"
     lo, hi = MG.bulk_range(system.g, np.ascontiguousarray(ids, dtype=np.int32))
     return "multigrid" if np.isfinite(lo) and hi >= AUTO_CONTRAST * lo else "fft"
+
 
 #: Grids with fewer voxels than this run single-threaded by default.
 SERIAL_BELOW = 40 ** 3
@@ -254,7 +256,6 @@ class _PreparedFFT(PreparedSystem):
         kind = backend.preconditioner
         if kind == "auto":
             kind = choose_preconditioner(system)
-        self.kind = kind
         if kind == "multigrid":
             self.preconditioner = _MultigridPreconditioner(system, self.labels_flat,
                                                            self.counts)
