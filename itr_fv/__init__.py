@@ -9,8 +9,10 @@ Public API::
 
 Modules: ``materials`` (phases, resistances), ``microstructure`` (voxel images),
 ``psd`` (lognormal size distributions), ``packing`` and ``rve`` (RVE generation),
-``model`` (the discrete model both solvers solve), ``solver`` (this reference solver),
-``solver_common`` and ``result`` (shared by both solvers), ``warm_start``, ``analytic``,
+``model`` (the discrete model both solvers solve; its parts: ``face_geometry``,
+``contact_zones``, ``cut_cells``, ``sphere_geometry``, ``interface_law`` (the staircase and
+segment laws), ``operator``, ``connectivity``), ``solver`` (this reference solver),
+``solve`` and ``result`` (shared by both solvers), ``warm_start``, ``analytic``,
 ``vtk_output`` and ``particle_render`` (pyvista output), ``resources`` (the memory guard),
 ``io`` (atomic writes, run manifests), ``checks`` (argument checks), ``numba_cache`` (where
 compiled kernels are cached: never inside the installed package).

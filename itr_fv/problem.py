@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .checks import PhysicalScaleWarning, VoxelContactWarning
+from .interface_law import InterfaceLaw
 from .materials import CONTACT_MODELS, Materials
 from .microstructure import Microstructure
 from .model import DEFAULT_TOUCH_GAP_M, FaceGeometry, connected_components, face_geometry
@@ -84,22 +85,31 @@ class DiscreteProblem:
         Pairs closer than this (m) touch and carry contact spots (``contact="gap"``).
     geometry : FaceGeometry, optional
         A precomputed geometry of ``ms`` for this contact model.
+    interface : {"staircase", "segment"} or InterfaceLaw
+        The interface law (:mod:`itr_fv.interface_law`): ``"staircase"`` (centre labels,
+        half voxels, staircase factor) or ``"segment"`` (cut cells: lengths and crossings
+        along every face's segment through the analytic spheres; gap contacts only).
     """
 
     def __init__(self, ms: Microstructure, *, contact: str = "gap", staircase: bool = True,
                  touch_gap_m: float = DEFAULT_TOUCH_GAP_M,
-                 geometry: FaceGeometry | None = None) -> None:
+                 geometry: FaceGeometry | None = None,
+                 interface: str | InterfaceLaw = "staircase") -> None:
         if not isinstance(ms, Microstructure):
             raise ValueError(f"ms: expected a Microstructure, got {type(ms).__name__}")
         if contact not in CONTACT_MODELS:
             raise ValueError(f"contact: expected one of {CONTACT_MODELS}, got {contact!r}")
         if geometry is None:
-            geometry = face_geometry(ms, staircase, contact=contact, touch_gap_m=touch_gap_m)
+            geometry = face_geometry(ms, staircase, contact=contact, touch_gap_m=touch_gap_m,
+                                     interface=interface)
         elif not isinstance(geometry, FaceGeometry) or geometry.shape != ms.shape:
             raise ValueError("geometry: expected the FaceGeometry of this microstructure")
         elif geometry.contact_model != contact:
             raise ValueError(f"geometry: built for contact={geometry.contact_model!r}, not "
                              f"{contact!r}")
+        elif geometry.law.name != getattr(interface, "name", interface):
+            raise ValueError(f"geometry: built for interface={geometry.law.name!r}, not "
+                             f"{interface!r}")
         self.microstructure = ms
         self.geometry = geometry
         self.contact = contact
@@ -114,7 +124,9 @@ class DiscreteProblem:
                 and geometry.contact_model != mat.contact:
             raise ValueError(f"geometry: built for contact={geometry.contact_model!r}, but the "
                              f"materials use contact={mat.contact!r}")
-        return cls(ms, contact=mat.contact, staircase=staircase, geometry=geometry)
+        interface = geometry.law if isinstance(geometry, FaceGeometry) else "staircase"
+        return cls(ms, contact=mat.contact, staircase=staircase, geometry=geometry,
+                   interface=interface)
 
     @property
     def shape(self) -> tuple[int, int, int]:
@@ -163,5 +175,6 @@ class DiscreteProblem:
 
     def __repr__(self) -> str:
         return (f"DiscreteProblem({self.microstructure!r}, contact={self.contact!r}, "
+                f"interface={self.geometry.law.name!r}, "
                 f"{self.geometry.n_interface_faces} interface faces, "
                 f"{self.geometry.n_contact_faces} contact faces)")

@@ -2,9 +2,11 @@
 
 Every face of the discrete model (:mod:`itr_fv.model`) is a series of resistances: the two
 half voxels ``h / (2 k)``, the interface ``s R`` where the face crosses one, the matrix film
-``d / k_m`` of the gap contact model, the segment lengths of the contact zones. With the
-parameter vector ``rho`` made of ``1 / k`` for conductivities and ``R`` for resistances, the
-face resistance (m^2 K/W) is therefore *affine*::
+``d / k_m`` of the gap contact model, the segment lengths of the contact zones or of the cut
+cells (segment law). With the parameter vector ``rho`` made of ``1 / k`` for conductivities
+and ``R`` for resistances, the face resistance (m^2 K/W) is therefore *affine*; the interface
+law says so for each parameter kind (:attr:`itr_fv.interface_law.InterfaceLaw.affine_in`),
+and a parameter it is not affine in is refused::
 
     r_f(rho) = c_f + sum_i a_fi rho_i,      g_f = 1 / r_f      (W/(m^2 K))
 
@@ -136,6 +138,7 @@ class ResistanceDecomposition:
     """
 
     def __init__(self, geometry: FaceGeometry, materials: Materials, box: ParameterBox) -> None:
+        self._check_law(geometry, box)
         P = box.size
         lo_set = box.materials(materials, box.lo)
         r_lo = self._resistance(geometry, lo_set)
@@ -165,6 +168,21 @@ class ResistanceDecomposition:
             raise RuntimeError(f"the face resistances are not affine in (1/k, R) for this model "
                                f"(relative deviation {self.check_error:.2g}); the reduced basis "
                                "cannot decompose it")
+
+    @staticmethod
+    def _check_law(geometry: FaceGeometry, box: ParameterBox) -> None:
+        """Ask the interface law whether its face resistances are affine in ``rho`` (1/k for
+        conductivities, the value for resistances) for every varied parameter."""
+        law = geometry.law
+        for name, is_k in zip(box.names, box.is_conductivity):
+            kind = parse_parameter(name)[0]
+            coordinate = law.affine_in.get(kind)
+            if coordinate is None:
+                raise ValueError(f"bounds: the {law.name} interface law's face resistances are "
+                                 f"not affine in {name}; the reduced basis cannot vary it")
+            if coordinate != ("inverse" if is_k else "linear"):
+                raise ValueError(f"bounds: the {law.name} interface law is affine in "
+                                 f"{name} through {coordinate!r}, not as the parameter box maps it")
 
     @staticmethod
     def _resistance(geometry: FaceGeometry, mat: Materials) -> np.ndarray:

@@ -80,9 +80,19 @@ def unit_cell(lattice: str, f: float, k_ratio: float, alpha: float, n: int, rep:
     return ms, mat
 
 
+#: Solver keys of the segment interface law (issue 28) and their crossing share.
+SEGMENT_SOLVERS = {"fft_seg": "staircase", "fft_segn": "normal", "fv_seg": "staircase"}
+
+
 def solve(solver: str, lattice: str, f: float, k_ratio: float, alpha: float, n: int,
           staircase: bool) -> dict:
-    """One solve of k_xx; returns a CSV row."""
+    """One solve of k_xx; returns a CSV row.
+
+    ``solver``: ``fft``/``fv`` (staircase law, per-area contact R(p, p) = alpha a),
+    ``fft_2x`` (the same on a 2 x 2 x 2 supercell), ``fft_seg``/``fv_seg``/``fft_segn``
+    (segment law with the staircase / normal crossing share, gap contacts: R at every
+    particle-matrix crossing, the matrix film between spheres along each segment).
+    """
     if solver.startswith("fft"):
         import itr_fft as mod
     else:
@@ -90,8 +100,19 @@ def solve(solver: str, lattice: str, f: float, k_ratio: float, alpha: float, n: 
     # "fft_2x": 2 x 2 x 2 supercell at the same voxel size (n = voxels per conventional cell)
     ms, mat = unit_cell(lattice, f, k_ratio, alpha, n, rep=2 if solver == "fft_2x" else 1)
     t0 = time.perf_counter()
-    res = mod.homogenize(ms, mat, tol=TOL, directions=(0,), staircase=staircase,
-                         store_fields=False)
+    if solver in SEGMENT_SOLVERS:
+        from itr_fv.interface_law import SegmentLaw
+        from itr_fv.problem import DiscreteProblem
+
+        mat = Materials(mat.conductivity,
+                        {("filler", "matrix"): mat.resistance_between("filler", "matrix")},
+                        "matrix", contact="gap")
+        problem = DiscreteProblem(ms, contact="gap",
+                                  interface=SegmentLaw(share=SEGMENT_SOLVERS[solver]))
+        res = mod.homogenize(problem, mat, tol=TOL, directions=(0,), store_fields=False)
+    else:
+        res = mod.homogenize(ms, mat, tol=TOL, directions=(0,), staircase=staircase,
+                             store_fields=False)
     wall = time.perf_counter() - t0
     ref = analytic.sphere_array(lattice, f, k_ratio, alpha)
     k = float(res.k_eff[0, 0]) / K_M
@@ -156,12 +177,25 @@ def plan(full: bool) -> list[tuple]:
             e = abs(float(row["rel_err"]))
             if (k[2] <= 0.3 and e > 0.005) or (k[2] >= 0.5 and e > 0.01):
                 runs.append(("fft", *k[1:5], 192, True))
+    # 8. issue 28: the segment interface law, every case, and both laws at h = a/12
+    for c in cases:
+        n12 = a12_grid(c[0], c[1])
+        runs.append(("fft", *c, n12, True))
+        runs += [("fft_seg", *c, n, True) for n in sorted({24, 32, 48, 64, 96, 128, n12})]
+        runs += [("fft_segn", *c, n, True) for n in sorted({24, 32, 48, 64, 96, n12})]
+        if representative(*c):
+            runs += [("fv_seg", *c, n, True) for n in (32, 48)]
     seen, out = set(), []
     for r in runs:
         if r not in seen:
             seen.add(r)
             out.append(r)
     return out
+
+
+def a12_grid(lattice: str, f: float) -> int:
+    """Grid with h = a / 12 (12 voxels per sphere radius), the issue-28 acceptance point."""
+    return int(round(12.0 / _radius(lattice, f)))
 
 
 def key_of(row: dict) -> tuple:
@@ -187,7 +221,7 @@ def self_contact(lattice: str, f: float, n: int) -> bool:
     < a, the sphere and its image touch in the voxel image although the real array has a gap
     between them. Only SC at f = 0.5 (gap 0.015 L) is affected, at n <= 64. The model treats
     that bridge like any particle-particle contact (R(p, p) = alpha a, s = 1; see
-    ``itr_fv.model._self_image_faces``), as a 2 x 2 x 2 supercell with distinct ids would.
+    ``itr_fv.face_geometry.self_image_faces``), as a 2 x 2 x 2 supercell with distinct ids would.
     """
     m = len(SITES[lattice])
     a = (3.0 * f / (4.0 * math.pi * m)) ** (1.0 / 3.0)
@@ -235,6 +269,8 @@ def series(rows: list[dict]) -> dict:
     d: dict = {}
     for r in rows:
         s, lat, f, kr, al, n, st = key_of(r)
+        if s == "fft" and n not in SIZES["fft"]:
+            s = "fft_a12"  # the staircase law at h = a/12 (issue 28), kept out of its series
         d.setdefault((s, st, lat, f, kr, al), []).append(
             (n, float(r["k_over_km"]), float(r["rel_err"]), float(r["reference"]),
              int(r["iterations"]), float(r["wall_s"])))
@@ -369,6 +405,7 @@ def write_report(rows: list[dict], elapsed: float | None = None) -> None:
         L.append(f"FV vs FFT: {len(diffs)} common solves, max |k_FV / k_FFT - 1| = "
                  f"{max(diffs):.1e} (tol = {TOL:g}): both solvers have the same error curves.\n")
 
+    L.extend(_interface_laws(ser))
     L.extend(_discussion(ser))
     # ---------------- per lattice tables
     ns_all = SIZES["fft"]
@@ -415,7 +452,7 @@ def write_report(rows: list[dict], elapsed: float | None = None) -> None:
                  "The model treats that image contact like any particle-particle contact: the "
                  "faces where a sphere meets its own periodic image carry R(p, p) = alpha a with "
                  "staircase factor s = 1 (line of centres along the axis; "
-                 "`itr_fv.model._self_image_faces`). The same array built as a 2 x 2 x 2 "
+                 "`itr_fv.face_geometry.self_image_faces`). The same array built as a 2 x 2 x 2 "
                  "supercell (8 spheres, 8 ids, grid 2n, i.e. the same voxel size), where the "
                  "bridge is an ordinary contact between two different particles, gives the same "
                  "k_xx:\n")
@@ -491,6 +528,106 @@ def write_report(rows: list[dict], elapsed: float | None = None) -> None:
                              f"{v[5][i]:.2f} | {other[5][j]:.2f} |")
         L.append("")
     MD_PATH.write_text("\n".join(L) + "\n")
+
+
+#: Laws compared in the issue-28 section: (label, solver key of the series, a/12 key).
+LAWS = (("staircase", "fft", "fft_a12"), ("segment", "fft_seg", "fft_seg"),
+        ("segment, normal share", "fft_segn", "fft_segn"))
+
+
+def _interface_laws(ser: dict) -> list[str]:
+    """Issue 28: the segment law against the staircase law, order and error at h = a/12."""
+    if not any(k[0] == "fft_seg" for k in ser):
+        return []
+    L = ["## Interface laws: staircase vs segment (issue 28)\n",
+         "The segment law (`itr_fv.interface_law.SegmentLaw`, gap contacts: R at every "
+         "particle-matrix crossing, the matrix film along each segment) with the staircase "
+         "crossing share (`segment`) and the normal share (`segment, normal share`), FFT "
+         "solver, against the staircase law above. `p` over the three finest grids of each "
+         "series (staircase: 64/96/128 or 96/128/192; segment: 64/96/128; normal share: "
+         "48/64/96); the segment series keep every grid (the law resolves the film between "
+         "a sphere and its image, so no grid is marked `b`). h = a/12 is the grid "
+         "n = round(12 L / a) of each case.\n"]
+    cases = [(lat, f, kr, al) for lat, fs in FRACTIONS.items() for f in fs
+             for kr in K_RATIOS for al in ALPHAS]
+    L.append("| law | cases | median p (no sign change) | IQR of p | sign changes | "
+             "max abs err at a/12 (%) | cases within 0.5 % at a/12 | max abs err at 96 (%) |")
+    L.append("| --- " * 8 + "|")
+    for label, key, key12 in LAWS:
+        ps, n_sc, e12, e96, nc = [], 0, [], [], 0
+        for c in cases:
+            v = ser.get((key, True) + c)
+            if not v:
+                continue
+            nc += 1
+            ns, errs = v[0], v[2]
+            if key == "fft":
+                ns, errs = clean(c[0], c[1], c[3], ns, errs)
+            p, sc = observed_order(ns, errs)
+            if sc:
+                n_sc += 1
+            elif math.isfinite(p):
+                ps.append(p)
+            w = ser.get((key12, True) + c)
+            n12 = a12_grid(c[0], c[1])
+            if w and n12 in w[0]:
+                e12.append(abs(w[2][w[0].index(n12)]))
+            if 96 in v[0]:
+                e96.append(abs(v[2][v[0].index(96)]))
+        if not nc:
+            continue
+        L.append(f"| {label} | {nc} | {np.median(ps):.2f} | {np.percentile(ps, 25):.2f} - "
+                 f"{np.percentile(ps, 75):.2f} | {n_sc} | "
+                 f"{100 * max(e12) if e12 else math.nan:.2f} | "
+                 f"{sum(e <= 0.005 for e in e12)} of {len(e12)} | "
+                 f"{100 * max(e96) if e96 else math.nan:.2f} |")
+    L.append("")
+    L.append("| case | n at a/12 | " + " | ".join(f"err a/12 {lab} (%)" for lab, _, _ in LAWS)
+             + " | " + " | ".join(f"p {lab}" for lab, _, _ in LAWS) + " |")
+    L.append("| --- " * (2 + 2 * len(LAWS)) + "|")
+    for c in cases:
+        n12 = a12_grid(c[0], c[1])
+        cells, pcells = [], []
+        for label, key, key12 in LAWS:
+            w = ser.get((key12, True) + c)
+            cells.append(_fmt_err(w[2][w[0].index(n12)]) if w and n12 in w[0] else "")
+            v = ser.get((key, True) + c)
+            if v:
+                ns, errs = v[0], v[2]
+                if key == "fft":
+                    ns, errs = clean(c[0], c[1], c[3], ns, errs)
+                p, sc = observed_order(ns, errs)
+                pcells.append(f"{p:.2f}{'*' if sc else ''}")
+            else:
+                pcells.append("")
+        L.append(f"| {_case_label(*c)} | {n12} | " + " | ".join(cells) + " | "
+                 + " | ".join(pcells) + " |")
+    L.append("")
+    fv = [(k, v) for k, v in ser.items() if k[0] == "fv_seg"]
+    diffs = []
+    for k, v in fv:
+        other = ser.get(("fft_seg",) + k[1:])
+        for n, kk in zip(v[0], v[1]):
+            if other and n in other[0]:
+                diffs.append(abs(kk / other[1][other[0].index(n)] - 1))
+    if diffs:
+        L.append(f"Segment law, FV vs FFT: {len(diffs)} common solves, max |k_FV / k_FFT - 1| "
+                 f"= {max(diffs):.1e} (tol = {TOL:g}).\n")
+    L.append("Per-case series of the segment law (FFT, error in %):\n")
+    grid = sorted({n for k, v in ser.items() if k[0] == "fft_seg" for n in v[0]
+                   if n in (24, 32, 48, 64, 96, 128)})
+    L.append("| case | " + " | ".join(f"err {n}" for n in grid) + " | p |")
+    L.append("| --- " * (2 + len(grid)) + "|")
+    for c in cases:
+        v = ser.get(("fft_seg", True) + c)
+        if not v:
+            continue
+        p, sc = observed_order(v[0], v[2])
+        L.append(f"| {_case_label(*c)} | "
+                 + " | ".join(_fmt_err(v[2][v[0].index(n)]) if n in v[0] else ""
+                              for n in grid) + f" | {p:.2f}{'*' if sc else ''} |")
+    L.append("")
+    return L
 
 
 def _radius(lattice: str, f: float) -> float:

@@ -28,23 +28,32 @@ sys.path.insert(0, str(ROOT))
 import itr_fft  # noqa: E402
 import itr_fv  # noqa: E402
 from itr_fv.gallery import build, rve_cases, with_contact  # noqa: E402
+from itr_fv.problem import DiscreteProblem  # noqa: E402
 
 TOL = 1e-10
 
 
-#: Contact models compared: the per-area model, the gap model, the gap model with spots.
-CONTACTS = ("area", "gap", "gap+spots")
+#: Contact models compared: the per-area model, the gap model, the gap model with spots
+#: (staircase interface law), and the gap model with and without spots under the segment
+#: interface law (issue 28; RVEs with a particle table only).
+CONTACTS = ("area", "gap", "gap+spots", "segment", "segment+spots")
 
 
 def _materials(name: str, size: str, contact: str):
-    """(Microstructure, Materials) of a case under a contact model of :data:`CONTACTS`."""
+    """(problem or Microstructure, Materials) of a case under a contact model of
+    :data:`CONTACTS`; None for the segment law on an RVE without a particle table."""
     ms, mat = build(name, size)
     if contact == "area":
         return ms, mat
     fillers = [p for p in mat.phases if p != mat.matrix]
-    spots = ({(a, b): 2e-6 for a in fillers for b in fillers} if contact == "gap+spots"
+    spots = ({(a, b): 2e-6 for a in fillers for b in fillers} if contact.endswith("+spots")
              else None)
-    return ms, with_contact(mat, "gap", spots)
+    mat = with_contact(mat, "gap", spots)
+    if contact.startswith("segment"):
+        if ms.particles is None:
+            return None
+        return DiscreteProblem(ms, contact="gap", interface="segment"), mat
+    return ms, mat
 
 
 def run(size: str, names: list[str] | None = None,
@@ -62,7 +71,10 @@ def _run_contact(size: str, names: list[str] | None, contact: str) -> list[dict]
         if names and case.name not in names:
             continue
         t = time.perf_counter()
-        ms, mat = _materials(case.name, size, contact)
+        built = _materials(case.name, size, contact)
+        if built is None:
+            continue
+        ms, mat = built
         t_build = time.perf_counter() - t
         fft = itr_fft.homogenize(ms, mat, tol=TOL, store_fields=False, preconditioner="fft")
         mg = itr_fft.homogenize(ms, mat, tol=TOL, store_fields=False,
@@ -106,7 +118,9 @@ def write_report(rows: list[dict], size: str, path: Path) -> None:
         "",
         "Contact models: `area` (per-area contact resistance of the case), `gap` (film "
         "between the analytic spheres, particle-matrix resistances only), `gap+spots` (gap "
-        "with a 2e-6 W/K contact spot per touching pair).",
+        "with a 2e-6 W/K contact spot per touching pair), `segment` and `segment+spots` (the "
+        "gap model under the segment interface law, `itr_fv.interface_law.SegmentLaw`; RVEs "
+        "with a particle table only).",
         "",
         "| contact | RVE | grid | k_eff diag FV (W/mK) | k_eff diag FFT (W/mK) | diff fft / "
         "mg | it FV | it FFT | it mg | t FV (s) | t FFT (s) | t mg (s) | floating | ok |",

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import time
 import warnings
 from pathlib import Path
 
@@ -32,15 +33,34 @@ from csv_store import append_row, load_rows  # noqa: E402
 
 BOX_UM = 16.0
 FIELDS = ["model", "seed", "voxel_um", "n", "k_xx", "k_yy", "k_zz", "k_iso", "filled_voxels",
-          "contact_faces", "spot_conductance_W_per_K", "iterations", "wall_s"]
-#: (model, seed) pairs of the study
-RUNS = [("gap", 1), ("gap", 2), ("gap+spots", 1), ("area", 1)]
+          "contact_faces", "spot_conductance_W_per_K", "iterations", "wall_s", "geometry_s"]
+#: (model, seed) pairs of the study. ``segment``: the gap model under the segment interface
+#: law (issue 28); ``aln-*``: 60 vol% AlN (mu = 1.25, sigma = 0.59, k = 200 W/(m K),
+#: R_b = 3e-8 m^2 K/W) under the staircase (``aln-gap``) or segment law.
+RUNS = [("gap", 1), ("gap", 2), ("gap+spots", 1), ("area", 1), ("segment", 1), ("segment", 2),
+        ("aln-gap", 1), ("aln-segment", 1)]
+#: Pairs of (staircase, segment) series on the same packing: the two laws of issue 28.
+LAW_PAIRS = [(("gap", 1), ("segment", 1)), (("gap", 2), ("segment", 2)),
+             (("aln-gap", 1), ("aln-segment", 1))]
+
+
+def filler(model: str) -> str:
+    return "AlN" if model.startswith("aln") else "Al2O3"
+
+
+def interface(model: str) -> str:
+    return "segment" if model.endswith("segment") else "staircase"
 
 
 def materials(model: str):
     from itr_fv import Materials
 
+    if model.startswith("aln"):
+        return Materials({"silicone": 0.18, "AlN": 200.0}, {("AlN", "silicone"): 3e-8},
+                         "silicone", contact="gap")
     k = {"silicone": 0.18, "Al2O3": 30.0}
+    if model == "segment":
+        return Materials(k, {("Al2O3", "silicone"): 2.2e-8}, "silicone", contact="gap")
     if model == "area":
         return Materials(k, {("Al2O3", "silicone"): 2.2e-8, ("Al2O3", "Al2O3"): 2e-7},
                          "silicone", contact="area")
@@ -58,15 +78,19 @@ def solve(model: str, seed: int, h: float) -> dict:
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)
-        ms0 = generate_rve([FillerSpec("Al2O3", mu=1.02, sigma=0.35, volume_fraction=0.60)],
-                           box_um=BOX_UM, voxel_um=0.4, seed=seed, matrix="silicone",
+        spec = (FillerSpec("AlN", mu=1.25, sigma=0.59, volume_fraction=0.60)
+                if filler(model) == "AlN" else
+                FillerSpec("Al2O3", mu=1.02, sigma=0.35, volume_fraction=0.60))
+        ms0 = generate_rve([spec], box_um=BOX_UM, voxel_um=0.4, seed=seed, matrix="silicone",
                            max_diameter_box_ratio=0.45)
     t = ms0.particles
     n = int(round(BOX_UM / h))
     ms = Microstructure.from_spheres(t.centers_m, t.radii_m, t.material, box_m=BOX_UM * 1e-6,
                                      shape=n, matrix="silicone")
     mat = materials(model)
-    problem = DiscreteProblem(ms, contact=mat.contact)
+    t0 = time.perf_counter()
+    problem = DiscreteProblem(ms, contact=mat.contact, interface=interface(model))
+    setup = time.perf_counter() - t0
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", VoxelContactWarning)
         res = itr_fft.homogenize(problem, mat, tol=1e-8, store_fields=False)
@@ -76,7 +100,8 @@ def solve(model: str, seed: int, h: float) -> dict:
                 filled_voxels=problem.geometry.filled_voxels,
                 contact_faces=problem.geometry.n_contact_faces,
                 spot_conductance_W_per_K=f"{problem.geometry.total_spot_conductance(mat):.6g}",
-                iterations="/".join(map(str, res.iterations)), wall_s=f"{res.wall_time:.1f}")
+                iterations="/".join(map(str, res.iterations)), wall_s=f"{res.wall_time:.1f}",
+                geometry_s=f"{setup:.1f}")
 
 
 def extrapolate(hs: list[float], ks: list[float]) -> float:
@@ -139,13 +164,18 @@ def report(rows: list[dict], out: Path) -> None:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--voxels", default="0.25,0.2,0.16,0.125,0.1,0.08,0.0625")
+    ap.add_argument("--voxels", default="0.4,0.25,0.2,0.16,0.125,0.1,0.08,0.0625")
+    ap.add_argument("--models", default=None,
+                    help="comma-separated models to run (default: all of RUNS)")
     ap.add_argument("--report-only", action="store_true")
     ap.add_argument("--out", default=str(ROOT / "validation" / "results" / "resolution.md"))
     args = ap.parse_args()
     store = Path(args.out).with_suffix(".csv")
     if not args.report_only:
+        models = args.models.split(",") if args.models else None
         for model, seed in RUNS:
+            if models and model not in models:
+                continue
             for h in (float(v) for v in args.voxels.split(",")):
                 done = {(r["model"], int(r["seed"]), float(r["voxel_um"]))
                         for r in load_rows(store)}

@@ -1,0 +1,346 @@
+"""Interface faces of a voxel image: where the labels change, their staircase factors,
+the particle pairs in contact and their films, and (segment law) the cut cells.
+
+:func:`face_geometry` computes everything that does not depend on material values once; a
+parameter change only needs :meth:`FaceGeometry.conductances` again, which hands the
+geometry to its interface law (:mod:`itr_fv.interface_law`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.ndimage
+
+from .contact_zones import (
+    DEFAULT_TOUCH_GAP_M,
+    contact_films,
+    fill_thin_films,
+    zone_segments,
+)
+from .cut_cells import SHARES, SurfaceCuts, surface_cuts
+from .interface_law import InterfaceLaw, StaircaseLaw, interface_law
+from .materials import Materials
+from .microstructure import Microstructure
+from .sphere_geometry import min_image, particle_material_ids, staircase_factor
+
+__all__ = ["FaceGeometry", "face_geometry", "face_conductances", "self_image_faces"]
+
+_STAIRCASE_SHARE = SHARES["staircase"]
+
+
+@dataclass(frozen=True)
+class FaceGeometry:
+    """Interface faces of a microstructure, independent of material values.
+
+    A parameter change (conductivities, resistances) only needs :meth:`conductances`
+    again; the geometry is computed once.
+
+    Attributes
+    ----------
+    shape : tuple of int
+        Grid shape (n1, n2, n3).
+    voxel_m : float
+        Voxel edge h, m.
+    material_ids : ndarray of int32
+        Material id per voxel (shared with the microstructure, not copied).
+    index : tuple of 3 int64 arrays
+        Flat index of the lower voxel p of every interface face, per axis.
+    mat_lo, mat_hi : tuple of 3 int32 arrays
+        Material ids of p and of q = p + e_d at those faces.
+    contact : tuple of 3 bool arrays
+        True at faces between two different particles (contact faces).
+    s : tuple of 3 float64 arrays
+        Staircase factor of those faces (1 when the correction is off).
+    staircase : str
+        How s was obtained: ``"off"``, ``"spheres"`` (analytic normals) or ``"image"``.
+    film : tuple of 3 float64 arrays, or None
+        Matrix film thickness d(x_f) at the contact faces, m (NaN at other faces); None
+        without a particle table.
+    pair : tuple of 3 int64 arrays, or None
+        Index of the particle pair of each contact face (-1 at other faces).
+    pair_particles : ndarray of int64, shape (P, 2), or None
+        Particle ids (1-based) of every pair that shares faces.
+    pair_gap_m : ndarray, or None
+        Closest-approach gap |c_q - c_p| - a_p - a_q of every pair, m.
+    pair_faces : ndarray of int64, or None
+        Number of faces of every pair.
+    pair_material_ids : ndarray of int32, shape (P, 2), or None
+        Material ids of the two particles of every pair.
+    touch_gap_m : float
+        Pairs with a closest gap at or below this touch (they get contact spots), m.
+    contact_model : str
+        The contact model the geometry was built for (``"gap"`` or ``"area"``).
+    filled_voxels : int
+        Matrix voxels of thin wedges given to particles (gap model, see
+        :func:`itr_fv.contact_zones.fill_thin_films`).
+    segments : tuple, or None
+        Faces of the contact zones and their segment geometry
+        (:func:`itr_fv.contact_zones.zone_segments`; staircase law, gap model).
+    particle_mat : ndarray of int64, or None
+        Material id of every particle id (index 0: the matrix).
+    law : InterfaceLaw
+        The interface law that turns this geometry and a :class:`Materials` into face
+        conductances (:mod:`itr_fv.interface_law`).
+    cuts : SurfaceCuts, or None
+        Faces that meet a sphere, with their segment geometry (segment law).
+    """
+
+    shape: tuple[int, int, int]
+    voxel_m: float
+    names: tuple[str, ...]
+    material_ids: np.ndarray
+    index: tuple[np.ndarray, np.ndarray, np.ndarray]
+    mat_lo: tuple[np.ndarray, np.ndarray, np.ndarray]
+    mat_hi: tuple[np.ndarray, np.ndarray, np.ndarray]
+    contact: tuple[np.ndarray, np.ndarray, np.ndarray]
+    s: tuple[np.ndarray, np.ndarray, np.ndarray]
+    staircase: str
+    film: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+    pair: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+    pair_particles: np.ndarray | None = None
+    pair_gap_m: np.ndarray | None = None
+    pair_faces: np.ndarray | None = None
+    pair_material_ids: np.ndarray | None = None
+    touch_gap_m: float = DEFAULT_TOUCH_GAP_M
+    contact_model: str = "area"
+    filled_voxels: int = 0
+    segments: tuple | None = None
+    particle_mat: np.ndarray | None = None
+    law: InterfaceLaw | None = None
+    cuts: SurfaceCuts | None = None
+
+    def __post_init__(self) -> None:
+        if self.law is None:
+            object.__setattr__(self, "law", StaircaseLaw(self.contact_model))
+
+    @property
+    def n_interface_faces(self) -> int:
+        return int(sum(a.size for a in self.index))
+
+    @property
+    def n_contact_faces(self) -> int:
+        """Faces between two different particles."""
+        return int(sum(int(c.sum()) for c in self.contact))
+
+    def touching_pairs(self) -> np.ndarray:
+        """Indices of the pairs whose closest gap is at most ``touch_gap_m``."""
+        if self.pair_gap_m is None:
+            return np.zeros(0, dtype=np.int64)
+        return np.flatnonzero(self.pair_gap_m <= self.touch_gap_m)
+
+    def total_spot_conductance(self, materials: Materials) -> float:
+        """Sum of the contact-spot conductances the grid carries, W/K.
+
+        Each touching pair that shares voxel faces carries its G_c (spread over its faces);
+        a touching pair that shares no face at this resolution carries none.
+        """
+        if self.pair_particles is None or materials.contact != "gap":
+            return 0.0
+        return float(sum(materials.spot_conductance(self.names[self.pair_material_ids[i, 0]],
+                                                    self.names[self.pair_material_ids[i, 1]])
+                         for i in self.touching_pairs()))
+
+    def conductances(self, materials: Materials) -> np.ndarray:
+        """Face conductances per unit area, W/(m^2 K).
+
+        Parameters
+        ----------
+        materials : Materials
+            Conductivities and resistances; every phase of the microstructure and every
+            interface pair it holds must be present.
+
+        Returns
+        -------
+        g : ndarray, shape (3, n1, n2, n3)
+            ``g[d][p]`` is the conductance of the face between p and p + e_d.
+        """
+        if not isinstance(materials, Materials):
+            raise ValueError(f"mat: expected a Materials object, got {type(materials).__name__}")
+        if materials.contact != self.contact_model:
+            raise ValueError(f"geometry: built for contact={self.contact_model!r}, but the "
+                             f"materials use contact={materials.contact!r}; build it with "
+                             f"face_geometry(ms, contact={materials.contact!r})")
+        return self.law.conductances(self, materials)
+
+
+def self_image_faces(table, pid: np.ndarray, pq: np.ndarray, d: int,
+                      shape: tuple[int, int, int], h: float) -> np.ndarray:
+    """Flat indices of axis-d faces where a sphere meets its own periodic image.
+
+    Both voxels carry the same particle id, but they lie in different periodic images of
+    the sphere (their minimum-image offsets from its centre differ by the box length, not
+    by h). Only spheres whose diameter comes within two voxels of the box edge can do this.
+    """
+    L = shape[d] * h
+    big = np.flatnonzero(2.0 * table.radii_m > L - 2.0 * h) + 1
+    if big.size == 0:
+        return np.zeros(0, dtype=np.int64)
+    cand = np.flatnonzero((np.isin(pid, big) & (pid == pq)).ravel())
+    if cand.size == 0:
+        return cand
+    i_d = np.unravel_index(cand, shape)[d]
+    c = table.centers_m[pid.ravel()[cand] - 1, d]
+    u_p = min_image((i_d + 0.5) * h - c, np.array(L))
+    u_q = min_image((i_d + 1.5) * h - c, np.array(L))
+    return cand[np.abs(u_q - u_p - h) > 0.5 * h]
+
+
+
+def face_geometry(ms: Microstructure, staircase: bool = True,
+                  image_smoothing: float = 1.5,
+                  touch_gap_m: float = DEFAULT_TOUCH_GAP_M,
+                  contact: str = "gap", interface: str | InterfaceLaw = "staircase"
+                  ) -> FaceGeometry:
+    """Find the interface faces of ``ms`` and their staircase factors.
+
+    Parameters
+    ----------
+    ms : Microstructure
+        The voxel image.
+    staircase : bool
+        Apply the staircase correction s = |n_x| + |n_y| + |n_z|. With a particle table,
+        n is analytic: from the particle centre to the face centre at a particle-matrix
+        face, along the (minimum-image) line of centres at a particle-particle face. For
+        a plain label image (no table) n is estimated from the gradient of the solid
+        indicator smoothed by a periodic Gaussian of ``image_smoothing`` voxels at
+        particle-matrix faces, and s = 1 is kept at particle-particle faces. With a
+        particle table, a sphere that meets its own periodic image (diameter within two
+        voxels of the box) gets contact resistance there too, with s = 1; a plain label
+        image cannot tell this apart from the inside of the particle.
+    image_smoothing : float
+        Gaussian width (voxels) of the image-based normal estimate.
+    touch_gap_m : float
+        Pairs whose closest surface gap is at most this (m) count as touching: they carry
+        the contact spots of ``Materials(contact_conductance=...)``.
+    contact : {"area", "gap"}
+        The contact model the geometry is for (``Materials.contact``; the default is the
+        same as there). With ``"gap"`` and a particle table, matrix wedges thinner than a voxel
+        between nearly touching spheres are given to the spheres (:func:`fill_thin_films`);
+        the geometry's own ``material_ids`` then differ from the microstructure's there
+        (staircase law only).
+    interface : {"staircase", "segment"} or InterfaceLaw
+        The interface law (:func:`itr_fv.interface_law.interface_law`), by name or as an
+        object (e.g. ``SegmentLaw(share="normal")``). The segment law needs the particle
+        table and ``contact="gap"``; it fills no thin films.
+
+    Returns
+    -------
+    FaceGeometry
+    """
+    if not isinstance(ms, Microstructure):
+        raise ValueError(f"ms: expected a Microstructure, got {type(ms).__name__}")
+    law = interface_law(interface, contact)
+    if law.name == "segment" and ms.particles is None:
+        raise ValueError("interface: the segment law needs the particle table (a "
+                         "Microstructure from from_spheres or generate_rve)")
+    shape, h = ms.shape, ms.voxel_m
+    pid, mid = ms.particle_ids, ms.material_ids
+    filled = 0
+    if contact == "gap" and ms.particles is not None and law.name == "staircase":
+        pid, mid, filled = fill_thin_films(ms)
+    box = np.array(shape, dtype=np.float64) * h
+    index, lo, hi, is_contact_all, s_all = [], [], [], [], []
+    films, pair_keys, gaps, keys_seen = [], [], [], []
+    table = ms.particles
+    mode = "off" if not staircase else ("spheres" if table is not None else "image")
+    grad = None
+    if mode == "image" and ms.n_particles:
+        solid = scipy.ndimage.gaussian_filter((pid > 0).astype(np.float64), image_smoothing,
+                                              mode="wrap")
+        grad = [0.5 * (np.roll(solid, -1, axis=a) - np.roll(solid, 1, axis=a)) for a in range(3)]
+    for d in range(3):
+        pq = np.roll(pid, -1, axis=d)
+        idx = np.flatnonzero((pid != pq).ravel())
+        if table is not None:
+            idx = np.union1d(idx, self_image_faces(table, pid, pq, d, shape, h))
+        p_lo = pid.ravel()[idx]
+        p_hi = pq.ravel()[idx]
+        index.append(idx)
+        lo.append(mid.ravel()[idx])
+        hi.append(np.roll(mid, -1, axis=d).ravel()[idx])
+        is_contact = (p_lo > 0) & (p_hi > 0)
+        is_contact_all.append(is_contact)
+        s = np.ones(idx.size)
+        # a sphere touching its own periodic image: the line of centres is e_d, s = 1
+        self_image = is_contact & (p_lo == p_hi)
+        if mode == "spheres" and idx.size:
+            ijk = np.stack(np.unravel_index(idx, shape), axis=1).astype(np.float64)
+            x_face = (ijk + 0.5) * h
+            x_face[:, d] += 0.5 * h
+            pm = ~is_contact
+            part = np.maximum(p_lo, p_hi)[pm] - 1
+            n_pm = min_image(x_face[pm] - table.centers_m[part], box)
+            s[pm] = staircase_factor(n_pm)
+            pp = is_contact & ~self_image
+            if pp.any():
+                a = p_lo[pp] - 1
+                b = p_hi[pp] - 1
+                n_pp = min_image(table.centers_m[b] - table.centers_m[a], box)
+                s[pp] = staircase_factor(n_pp)
+        if table is not None:
+            film = np.full(idx.size, np.nan)
+            key = np.full(idx.size, -1, dtype=np.int64)
+            gap0 = np.zeros(0)
+            if is_contact.any():
+                ijk = np.stack(np.unravel_index(idx[is_contact], shape), axis=1)
+                x_c = (ijk + 0.5) * h
+                x_c[:, d] += 0.5 * h
+                pa = np.minimum(p_lo, p_hi)[is_contact].astype(np.int64)
+                pb = np.maximum(p_lo, p_hi)[is_contact].astype(np.int64)
+                film[is_contact], gap0, shift = contact_films(table, pa, pb, x_c, d, box)
+                own = pa == pb  # a self-image contact seen from either side is one contact
+                flip = own & (shift[:, d] < 0)
+                shift[flip] *= -1
+                keys_seen.extend(map(tuple, np.column_stack([pa, pb, shift])))
+                key[is_contact] = np.arange(len(keys_seen) - pa.size, len(keys_seen))
+            films.append(film)
+            pair_keys.append(key)
+            gaps.append(gap0)
+        if mode == "image" and idx.size:
+            pm = np.flatnonzero(~is_contact)
+            p_flat = idx[pm]
+            q_flat = np.ravel_multi_index(
+                tuple(np.mod(c + (1 if a == d else 0), shape[a])
+                      for a, c in enumerate(np.unravel_index(p_flat, shape))), shape)
+            n_est = np.stack([0.5 * (grad[a].ravel()[p_flat] + grad[a].ravel()[q_flat])
+                              for a in range(3)], axis=1)
+            s[pm] = staircase_factor(n_est)
+        s_all.append(s)
+    extra = {}
+    if table is not None:
+        # one contact = (particle p, particle q, image shift of q); faces -> contact index
+        rows = np.array(keys_seen, dtype=np.int64).reshape(-1, 5)
+        uniq, first, inverse, counts = np.unique(rows, axis=0, return_index=True,
+                                                 return_inverse=True, return_counts=True)
+        inverse = inverse.reshape(-1)
+        gap_of_row = np.concatenate(gaps) if gaps else np.zeros(0)
+        pairs = uniq[:, :2]
+        face_pair = [np.where(k >= 0, inverse[np.maximum(k, 0)], -1) if inverse.size
+                     else np.full_like(k, -1) for k in pair_keys]
+        mat_of_particle = particle_material_ids(ms)
+        extra = dict(
+            film=tuple(films),
+            pair=tuple(face_pair), pair_particles=pairs, pair_gap_m=gap_of_row[first],
+            pair_faces=counts,
+            pair_material_ids=mat_of_particle[pairs].astype(np.int32),
+            touch_gap_m=float(touch_gap_m), filled_voxels=filled,
+            segments=(zone_segments(ms, _STAIRCASE_SHARE if staircase else None)
+                      if contact == "gap" and law.name == "staircase" else None),
+            particle_mat=mat_of_particle)
+        if law.name == "segment":
+            extra["cuts"] = surface_cuts(ms, law.share)
+    return FaceGeometry(tuple(shape), float(h), tuple(ms.names), mid, tuple(index), tuple(lo),
+                        tuple(hi), tuple(is_contact_all), tuple(s_all), mode,
+                        contact_model=contact, law=law, **extra)
+
+
+
+def face_conductances(ms: Microstructure, mat: Materials, staircase: bool = True) -> np.ndarray:
+    """Face conductances per unit area g, W/(m^2 K), shape (3, n1, n2, n3).
+
+    Shorthand for ``face_geometry(ms, staircase, contact=mat.contact).conductances(mat)``.
+    """
+    return face_geometry(ms, staircase, contact=mat.contact).conductances(mat)
+
