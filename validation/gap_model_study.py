@@ -33,18 +33,23 @@ A = 1.5e-6
 K_M = 0.18
 FINDINGS = """## Findings
 
-- At h = a/16 every case is within 2 % of the reference (largest 1.63 %, SC), with both
-  solvers (they agree to the solver tolerance). At a/12 the SC (up to 2.46 %) and FCC (up to
-  2.98 %) arrays with 1.5 nm films are not; BCC is (0.97 %). At a/8 the CI-size bound of 4 %
-  holds for SC and FCC, BCC reaches 4.16 % (1.5 nm, k_p 200, R_b 2e-8).
-- The error converges at first order with a voxelization jitter (the refinement table): it is
-  the first-order error of the staircase interface model (``convergence.md``: median order
-  0.96 on the sphere arrays without contacts), not of the contact treatment. Measured on the
-  a/12 cases (1.5 nm films): widening the segment zone from 3 to 6 voxels changes SC from
-  -2.10 to -2.18 % and FCC from -2.98 to -2.65 %; averaging the film conductance over 4 x 4
-  or 8 x 8 points of each contact face (the contact core is narrower than a voxel) changes
-  SC by 0.05 % and FCC not at all. Meeting 2 % at a/12 needs a higher-order interface
-  treatment of the whole sphere surface, not a change at the contacts."""
+- Staircase law: at h = a/16 every case is within 2 % of the reference (largest 1.63 %, SC),
+  with both solvers (they agree to the solver tolerance). At a/12 the SC (up to 2.46 %) and
+  FCC (up to 2.98 %) arrays with 1.5 nm films are not; BCC is (0.97 %). At a/8 BCC reaches
+  4.16 % (1.5 nm, k_p 200, R_b 2e-8).
+- Segment law (issue 28): no better. With the staircase share it is worse at every
+  resolution (5.12 / 2.67 / 2.22 % at a/8 / a/12 / a/16); with the normal share it is the
+  best at a/12 and a/16 (2.35 / 1.32 %) and on SC much better (0.95 % at a/12, 0.45 % at
+  a/16), but worse on BCC and at a/8 (5.38 %). Neither meets 2 % at a/8 or 1 % at a/12. The
+  errors are negative and first order in every law: the one-conductance-per-face interface
+  under-conducts where the surface is tilted to the grid (``tilted_interface.md``: a flat
+  interface at 45 degrees has the same first-order error under every law), and the segment
+  law's exact bulk lengths remove the staircase law's partly compensating positive error of
+  the centre labels.
+- Contacts are not the limit: on the a/12 cases (1.5 nm films), widening the staircase law's
+  segment zone from 3 to 6 voxels changes SC from -2.10 to -2.18 % and FCC from -2.98 to
+  -2.65 %; averaging the film conductance over 4 x 4 or 8 x 8 points of each contact face
+  changes SC by 0.05 % and FCC not at all."""
 
 
 LAWS = {"staircase": "staircase", "segment": ("segment", "staircase"),

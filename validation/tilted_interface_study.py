@@ -152,7 +152,23 @@ def main() -> None:
 
 FINDINGS = """## Findings
 
-Filled in from the table above by hand (see the closing note of issue 28)."""
+- Along a grid axis ((1, 0, 0)) every law is exact at every grid: lengths, the staircase
+  factor (1) and the shares (1) are all right there.
+- Tilted, every law converges at first order (p = 0.85 ... 1.02), with the same error to
+  three digits under all three laws wherever the normal makes equal angles with the cut axes
+  ((1, 1, 0), (1, 1, 1)), and with errors of 1-2 % at n = 128 (45 voxels between
+  interfaces at (1, 1, 0)). The error is there with equal conductivities and a resistance
+  only (k_a = k_m), and with a conductivity contrast and no resistance (k_a/k_m = 170,
+  R = 0): it is not the share rule of R, nor the bulk lengths. A face cut by a tilted
+  interface carries one conductance for two fluxes that need different ones: the flux
+  normal to the interface crosses it in series (harmonic mean, with R), the flux along it
+  does not cross it at all (arithmetic mean, no R). A 7-point stencil with one conductance
+  per face cannot give both, so the flux along the interface is throttled in a layer one
+  voxel thick: a first-order error of the effective tensor for any law of this form.
+- Second order needs the cross terms of the cut cells: a full conductivity tensor per cut
+  cell (laminate composite voxels) with a stencil that couples the axes (19 or 27 points),
+  or an immersed-interface stencil. Both change the operator that both solvers, the
+  multigrid and the reduced basis share."""
 
 
 if __name__ == "__main__":
