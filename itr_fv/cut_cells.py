@@ -26,10 +26,11 @@ def _staircase_share(n: np.ndarray, d: int) -> np.ndarray:
 
 
 def _normal_share(n: np.ndarray, d: int) -> np.ndarray:
-    return 1.0 / np.maximum(np.abs(n[:, d]), 1e-6)
+    unit_d = np.abs(n[:, d]) / np.sqrt((n * n).sum(axis=1))
+    return 1.0 / np.maximum(unit_d, 1e-6)
 
 
-#: Interface shares of one crossing of a face along e_d by a surface of unit normal n. Both
+#: Interface shares of one crossing of a face along e_d by a surface of normal n (any length). Both
 #: make the total interface conductance of a sphere converge to area / R: faces along e_d
 #: cut the surface with density |n_d| / h^2, so sum_d |n_d| / w_d = 1 for either.
 #: ``"staircase"``: w = |n_x| + |n_y| + |n_z| (the staircase law's factor);

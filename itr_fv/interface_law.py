@@ -143,7 +143,8 @@ class StaircaseLaw(InterfaceLaw):
         spots = np.array([materials.spot_conductance(names[a], names[b])
                           for a, b in geometry.pair_material_ids])
         spots[geometry.pair_gap_m > geometry.touch_gap_m] = 0.0
-        return spots / (geometry.pair_faces * geometry.voxel_m ** 2)
+        h = geometry.voxel_m
+        return spots / (geometry.pair_faces * h * h)
 
     def _refine(self, geometry: GeometryLike, gd: np.ndarray, d: int, k: np.ndarray,
                 R: np.ndarray) -> None:

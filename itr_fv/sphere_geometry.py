@@ -53,8 +53,8 @@ def segment_in_sphere(x0: np.ndarray, d: int, h: float, centre: np.ndarray, radi
         Sphere radius, m.
     share : callable or None
         ``share(n, d)`` -> the factor that multiplies the interface resistance R at each
-        crossing, from the unit surface normals n (shape (c, 3)) there; None counts 1 per
-        crossing.
+        crossing, from the outward surface normals n there (shape (c, 3), not normalised);
+        None counts 1 per crossing.
     """
     w = x0 - centre
     wd = w[:, d]
@@ -68,8 +68,7 @@ def segment_in_sphere(x0: np.ndarray, d: int, h: float, centre: np.ndarray, radi
     for t in (t1, t2):
         cross = (disc > 0) & (t > 0.0) & (t < 1.0)
         if cross.any():
-            n = w[cross]
+            n = w[cross]  # outward normal at the crossing, of length ~radius
             n[:, d] += t[cross] * h
-            n /= radius
             w_sum[cross] += 1.0 if share is None else share(n, d)
     return inside, w_sum
