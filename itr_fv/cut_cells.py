@@ -112,7 +112,9 @@ def surface_cuts(ms: Microstructure, share: str = "staircase") -> SurfaceCuts:
             cells = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
             x = (cells + 0.5) * h
             dist = np.sqrt(((x - c) ** 2).sum(axis=1))
-            near = dist < a + 1.01 * h  # a segment of length h from x can reach the sphere
+            # a segment of length h from x can reach the surface (it starts within h of it;
+            # one starting deeper lies wholly inside the convex sphere: the staircase law's face)
+            near = np.abs(dist - a) < 1.01 * h
             cells, x = cells[near], x[near]
             for d in range(3):
                 inside, w = segment_in_sphere(x, d, h, c, float(a), rule)
