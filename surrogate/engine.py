@@ -16,6 +16,19 @@ tolerance, the parameters under their flat names, ``k_xx`` ... ``k_zz``, ``k_iso
 iterations, residual and wall time, plus the request's labels (purpose, formulation,
 replica). Temperature fields, where asked for (reduced-basis snapshots), sit beside the row
 as ``.npz`` (no pickle).
+
+Where files are written: only here, on the client. A worker gets plain data (the RVE's
+spheres, the parameters) and returns plain data (the tensor, iterations, theta); no path
+is ever sent to a worker, and the store's folder is made absolute when the engine is made,
+so a worker started in another directory or on another machine (no shared filesystem)
+loses nothing. The campaign runner (:mod:`surrogate.runner`) works the same way.
+
+Which cluster can run a solver is decided in one place, :func:`open_client` and
+:func:`ready_workers`, for the engine and the campaign runner alike: a solver that needs a
+GPU (:func:`surrogate.solver_choice.worker_resources`) gets a LocalCluster of one worker per
+CUDA device, each declaring the resource ``GPU=1`` (none found: a one-line refusal), and on
+an external scheduler at least one worker must declare ``GPU`` (else a one-line refusal
+before anything is submitted; such tasks would otherwise wait forever).
 """
 
 from __future__ import annotations
@@ -46,8 +59,8 @@ from .solver_choice import check_solver, solver_backend, worker_resources
 from .store import rve_id, tensor_columns, tensor_of
 
 __all__ = ["RVEData", "SolveRequest", "SolveResult", "SolveStore", "SolveEngine",
-           "open_client", "worker_memory_limit", "geometry_builds", "clear_problem_cache",
-           "solve_row"]
+           "open_client", "ready_workers", "cuda_device_count", "needs_gpu",
+           "worker_memory_limit", "geometry_builds", "clear_problem_cache", "solve_row"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -290,10 +303,11 @@ def solve_row(request: SolveRequest, result: SolveResult) -> dict[str, Any]:
 # ---------------------------------------------------------------- the store
 class SolveStore:
     """Finished solves in a folder: ``solves/<key>.parquet`` (one row each) and
-    ``fields/<key>.npz`` (theta, where asked for), each written atomically."""
+    ``fields/<key>.npz`` (theta, where asked for), each written atomically, by the client
+    (``folder`` is made absolute at once)."""
 
     def __init__(self, folder: str | Path) -> None:
-        self.folder = Path(folder)
+        self.folder = Path(folder).absolute()
 
     def _row_path(self, key: str) -> Path:
         return self.folder / "solves" / f"{key}.parquet"
@@ -382,15 +396,50 @@ def worker_memory_limit(task_bytes: float) -> int:
     return int((float(task_bytes) + WORKER_BASE_BYTES) / float(pause))
 
 
+def cuda_device_count() -> int:
+    """CUDA devices this process sees: CuPy's count (else PyTorch's); 0 without either
+    library, without a driver or without a device (never raises)."""
+    try:
+        import cupy
+        return int(cupy.cuda.runtime.getDeviceCount())
+    except Exception:  # noqa: BLE001 - no CuPy, no driver or no device: all mean "none"
+        pass
+    try:
+        import torch
+        return int(torch.cuda.device_count()) if torch.cuda.is_available() else 0
+    except Exception:  # noqa: BLE001
+        return 0
+
+
+def needs_gpu(solver: str | None) -> bool:
+    """Whether a solver choice's solves ask the Dask workers for the resource ``GPU``."""
+    return bool(solver) and bool((worker_resources(solver) or {}).get("GPU"))
+
+
+def _gpu_refusal(solver: str, why: str, scheduler: str | None = None) -> str:
+    start = f"'dask worker {scheduler or 'ADDRESS'} --resources GPU=1' (one per GPU)"
+    if scheduler:
+        return (f"solver {solver!r} solves on a GPU, but {why}; start GPU workers with "
+                f"{start}, or choose another solver (e.g. 'fft' or 'mg')")
+    return (f"solver {solver!r} solves on a GPU, but {why}; choose another solver (e.g. "
+            f"'fft' or 'mg'), or use --scheduler with GPU workers started as {start}")
+
+
 def open_client(workers: int | None, scheduler: str | None, *, memory_per_worker: int,
-                echo: Callable[[str], None] = print):
+                echo: Callable[[str], None] = print, solver: str | None = None):
     """A dask client on ``scheduler``, or on a new LocalCluster of ``workers`` processes
     (fewer if ``memory_per_worker`` bytes each do not fit); returns (client, cluster or None).
+
+    With a ``solver`` that needs a GPU (:func:`needs_gpu`), the LocalCluster has one worker
+    per CUDA device (:func:`cuda_device_count`; at most ``workers``), each declaring the
+    resource ``GPU=1``. An external scheduler's workers are checked by :func:`ready_workers`.
 
     Raises
     ------
     ValueError
-        ``--scheduler: cannot reach ...`` when the scheduler does not answer in 5 s.
+        ``--scheduler: cannot reach ...`` when the scheduler does not answer in 5 s;
+        ``solver 'gpu' solves on a GPU, but ...`` when a local cluster is asked for GPU
+        solves on a machine without a CUDA device (nothing is started).
     """
     from dask.distributed import Client, LocalCluster
 
@@ -401,16 +450,60 @@ def open_client(workers: int | None, scheduler: str | None, *, memory_per_worker
             raise ValueError(f"--scheduler: cannot reach {scheduler!r} ({exc})") from None
     from itr_fv.resources import available_memory
 
+    gpu = needs_gpu(solver)
+    extra: dict[str, Any] = {}
+    if gpu:
+        devices = cuda_device_count()
+        if devices < 1:
+            raise ValueError(_gpu_refusal(solver, "this machine has no CUDA device for a "
+                                                  "local cluster (neither CuPy nor PyTorch "
+                                                  "finds one)"))
+        n = min(workers or devices, devices)
+        extra["resources"] = {"GPU": 1}
+    else:
+        n = workers or max(1, min(os.cpu_count() or 1, 4))
     avail = available_memory() or memory_per_worker
-    n = workers or max(1, min(os.cpu_count() or 1, 4))
     fit = max(1, int(avail // memory_per_worker))
     if fit < n:
         echo(f"memory: {n} workers of {memory_per_worker / 1e9:.2f} GB do not fit in "
              f"{avail / 1e9:.1f} GB; using {fit}")
         n = fit
     cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                           memory_limit=memory_per_worker, dashboard_address=None)
-    return Client(cluster), cluster
+                           memory_limit=memory_per_worker, dashboard_address=None, **extra)
+    try:
+        return Client(cluster), cluster
+    except BaseException:
+        cluster.close()
+        raise
+
+
+def ready_workers(client, scheduler: str | None, solver: str | None = None, *,
+                  timeout: float = 60) -> int:
+    """Number of workers on ``client``'s cluster once it can run ``solver``'s solves: waits
+    up to ``timeout`` s for a first worker of an external ``scheduler``, and, for a solver
+    that needs a GPU, requires a worker that declares the resource ``GPU``. Call it before
+    submitting anything.
+
+    Raises
+    ------
+    ValueError
+        One line: no worker joined; or no worker declares a GPU.
+    """
+    workers = client.scheduler_info().get("workers", {})
+    if not workers:
+        try:
+            client.wait_for_workers(1, timeout=timeout)
+        except TimeoutError:
+            raise ValueError(f"--scheduler: no worker joined {scheduler!r} within "
+                             f"{timeout:.0f} s; start workers with 'dask worker ADDRESS'"
+                             ) from None
+        workers = client.scheduler_info().get("workers", {})
+    if needs_gpu(solver) and not any((w.get("resources") or {}).get("GPU", 0) >= 1
+                                     for w in workers.values()):
+        why = (f"none of the {len(workers)} workers of --scheduler {scheduler!r} declares "
+               "the resource GPU" if scheduler else "the local cluster has no GPU worker")
+        raise ValueError(_gpu_refusal(solver, why, scheduler))
+    return len(workers)
 
 
 class SolveEngine:
@@ -459,14 +552,18 @@ class SolveEngine:
     def distributed(self) -> bool:
         return bool(self.workers or self.scheduler)
 
-    def _ensure_client(self, shape: Sequence[int]):
+    def _ensure_client(self, shape: Sequence[int], solver: str | None = None):
+        """The client (a LocalCluster made on first use, with GPU workers where ``solver``
+        needs them), checked by :func:`ready_workers` for ``solver`` before any submit."""
         with self._lock:
             if self._client is None:
                 from itr_fv.resources import estimate_peak_memory
                 need = worker_memory_limit(
                     estimate_peak_memory(shape, "itr_fft", store_fields=True))
                 self._client, self._cluster = open_client(
-                    self.workers, self.scheduler, memory_per_worker=need, echo=self.echo)
+                    self.workers, self.scheduler, memory_per_worker=need, echo=self.echo,
+                    solver=solver)
+            ready_workers(self._client, self.scheduler, solver)
             return self._client
 
     def close(self) -> None:
@@ -524,13 +621,10 @@ class SolveEngine:
         from dask.distributed import as_completed
 
         shape = next(iter(requests.values())).rve.shape
-        client = self._ensure_client(shape)
-        if self.scheduler and not client.scheduler_info().get("workers"):
-            try:
-                client.wait_for_workers(1, timeout=60)
-            except TimeoutError:
-                raise ValueError(f"--scheduler: no worker joined {self.scheduler!r} within "
-                                 "60 s; start workers with 'dask worker ADDRESS'") from None
+        # a GPU solver among them decides the cluster (and is refused before any submit)
+        solver = next((r.solver for r in requests.values() if needs_gpu(r.solver)),
+                      next(iter(requests.values())).solver)
+        client = self._ensure_client(shape, solver)
         futures = {client.submit(_run_payload, _payload(req), key=f"itr-solve-{key}",
                                  pure=False, resources=worker_resources(req.solver)): key
                    for key, req in requests.items()}

@@ -2,12 +2,16 @@
 
 A task (:class:`~itr_surrogate.campaign.Task`) is one RVE and a block of parameter sets. On a
 worker, :func:`run_task` packs and voxelizes the RVE (seeded: the same table every time),
-stores its particle table, builds its :class:`~itr_fv.problem.DiscreteProblem` once, and
-solves the block's parameter sets in order, each warm-started from the nearest set already
-solved in the task. The rows go to one Parquet part file, written atomically when the task
-is complete (:class:`~itr_surrogate.store.CampaignStore`). The driver (:func:`run_campaign`)
-submits the tasks whose part file is missing, shows a progress bar, and records failures
-without stopping the others.
+builds its :class:`~itr_fv.problem.DiscreteProblem` once, and solves the block's parameter
+sets in order, each warm-started from the nearest set already solved in the task. It writes
+nothing: it returns the rows and the RVE's particle table to the client. The driver
+(:func:`run_campaign`) submits the tasks whose part file is missing, shows a progress bar,
+and, as each task finishes, writes its RVE table and its rows as one Parquet part file,
+atomically (:class:`~itr_surrogate.store.CampaignStore`, whose folder is absolute in the
+client's working directory); a failure is recorded without stopping the others. No path
+goes to a worker, so workers started in any directory, on machines without a shared
+filesystem, lose nothing. At the end every task reported done must have its part file
+(else a :class:`~itr_surrogate.campaign.CampaignError` names the missing ones).
 
 Results do not depend on the number of workers or threads: the solvers' reductions are
 ordered (``itr_fft._kernels``), every RVE comes from its seed, and a task always solves its
@@ -23,13 +27,15 @@ from pathlib import Path
 
 import numpy as np
 
+from itr_fv.io import counted
 from itr_fv.parameters import parse_parameter
 from itr_fv.rve import PackedRVE, build_rve
 
 from .campaign import Campaign, CampaignError, Task, nearest_solved
 from .store import CampaignStore, rve_id, tensor_columns
 
-__all__ = ["run_campaign", "run_task", "campaign_rve", "RunSummary", "worker_memory"]
+__all__ = ["run_campaign", "run_task", "write_task_result", "campaign_rve", "RunSummary",
+           "worker_memory"]
 
 
 @dataclass(frozen=True)
@@ -63,11 +69,13 @@ def campaign_rve(camp: Campaign, formulation: str, replica: int) -> PackedRVE:
                      matrix=camp.matrix, warn_box_cut=False)
 
 
-def run_task(campaign: dict, task: dict, folder: str) -> dict:
-    """Solve one task and write its part file; returns ``{"task_id", "solves", "wall_s"}``.
+def run_task(campaign: dict, task: dict) -> dict:
+    """Solve one task; returns ``{"task_id", "solves", "wall_s", "rows", "rve"}``: the
+    part's rows and the RVE's particle table (``"rve"``: ``rid``, ``centers_m``,
+    ``radii_m``, ``materials``, ``meta``), for the client to write.
 
-    Runs on a dask worker (plain arguments: the campaign's dict form, the task's fields,
-    the folder).
+    Runs on a dask worker (plain arguments: the campaign's dict form and the task's fields;
+    it writes no file).
     """
     from itr_fv import __version__
     from itr_fv.problem import DiscreteProblem
@@ -76,14 +84,15 @@ def run_task(campaign: dict, task: dict, folder: str) -> dict:
     t0 = time.perf_counter()
     camp = Campaign.from_dict(campaign)
     task = Task(**{**task, "set_indices": tuple(task["set_indices"])})
-    store = CampaignStore(folder)
     ms, seed = campaign_rve(camp, task.formulation, task.replica)
     table = ms.particles
     rid = rve_id(table.centers_m, table.radii_m, list(table.material), ms.shape, ms.voxel_m)
-    store.write_rve(rid, table.centers_m, table.radii_m, list(table.material),
-                    {"formulation": task.formulation, "replica": task.replica,
-                     "seed": seed, "box_um": camp.box_um, "voxel_um": camp.voxel_um,
-                     "shape": list(ms.shape), "matrix": camp.matrix})
+    rve = {"rid": rid, "centers_m": np.asarray(table.centers_m, dtype=np.float64),
+           "radii_m": np.asarray(table.radii_m, dtype=np.float64),
+           "materials": [str(m) for m in table.material],
+           "meta": {"formulation": task.formulation, "replica": task.replica,
+                    "seed": seed, "box_um": camp.box_um, "voxel_um": camp.voxel_um,
+                    "shape": list(ms.shape), "matrix": camp.matrix}}
     problem = DiscreteProblem(ms, contact=camp.contact)
     backend = _backend(camp)
     sets = camp.parameter_sets(camp.formulation(task.formulation))
@@ -100,8 +109,18 @@ def run_task(campaign: dict, task: dict, folder: str) -> dict:
         thetas.append(np.stack(res.theta))
         rows.append(_row(camp, task, i, rid, mat, res, wall, near is not None, __version__)
                     | {"seed": seed})
-    store.write_part(task.task_id, rows)
-    return {"task_id": task.task_id, "solves": len(rows), "wall_s": time.perf_counter() - t0}
+    return {"task_id": task.task_id, "solves": len(rows), "wall_s": time.perf_counter() - t0,
+            "rows": rows, "rve": rve}
+
+
+def write_task_result(store: CampaignStore, result: dict) -> Path:
+    """Write what :func:`run_task` returned into ``store`` (on the client): the RVE's
+    particle table first, then the part file (each atomically); returns the part's path."""
+    rve = result["rve"]
+    store.write_rve(rve["rid"], np.asarray(rve["centers_m"], dtype=np.float64).reshape(-1, 3),
+                    np.asarray(rve["radii_m"], dtype=np.float64), list(rve["materials"]),
+                    rve["meta"])
+    return store.write_part(result["task_id"], result["rows"])
 
 
 def _row(camp: Campaign, task: Task, index: int, rid: str, mat, res, wall: float,
@@ -127,19 +146,26 @@ def worker_memory(camp: Campaign) -> int:
     (interpreter and allocator slack added, peak kept at dask's pause mark)."""
     from itr_fv.resources import estimate_peak_memory
 
-    from .engine import worker_memory_limit
+    from .engine import needs_gpu, worker_memory_limit
+    from .solver_choice import SOLVER_CHOICES
 
-    peak = estimate_peak_memory(camp.shape, _backend(camp), store_fields=True)
+    # a GPU solver's backend is sized by name: the client that sizes the workers may have no
+    # GPU (its workers do), and a GPU worker's host memory is at most the CPU run's
+    backend = SOLVER_CHOICES[camp.solver][0] if needs_gpu(camp.solver) else _backend(camp)
+    peak = estimate_peak_memory(camp.shape, backend, store_fields=True)
     fields = 3 * 8 * int(np.prod(camp.shape)) * camp.block_size
     return worker_memory_limit(peak + fields)
 
 
 def _client(workers: int | None, scheduler: str | None, camp: Campaign, echo: Callable):
-    """A dask client on the scheduler, or on a new LocalCluster sized by memory."""
+    """A dask client on the scheduler, or on a new LocalCluster sized by memory (with GPU
+    workers for a GPU solver): :func:`surrogate.engine.open_client` decides, as for every
+    solve of the package."""
     from .engine import open_client
 
     try:
-        return open_client(workers, scheduler, memory_per_worker=worker_memory(camp), echo=echo)
+        return open_client(workers, scheduler, memory_per_worker=worker_memory(camp),
+                           echo=echo, solver=camp.solver)
     except ValueError as err:
         raise CampaignError(str(err)) from None
 
@@ -169,7 +195,7 @@ def run_campaign(campaign: Campaign, folder: str | Path, *, workers: int | None 
     RunSummary
     """
     t0 = time.perf_counter()
-    store = CampaignStore(folder)
+    store = CampaignStore(folder)  # absolute in this (the client's) working directory
     store.check_for(campaign)
     tasks = campaign.tasks()
     done = store.done_tasks()
@@ -179,62 +205,73 @@ def run_campaign(campaign: Campaign, folder: str | Path, *, workers: int | None 
         return RunSummary(0, len(tasks), 0, 0, time.perf_counter() - t0, 0)
     client, cluster = _client(workers, scheduler, campaign, echo)
     try:
-        n_workers = _wait_for_workers(client, scheduler)
+        n_workers = _ready_workers(client, scheduler, campaign)
         store.open_for(campaign)
         store.remove_partial_files()
         echo(f"campaign {campaign.name}: {len(todo)} of {len(tasks)} tasks to run "
              f"({sum(len(t.set_indices) for t in todo)} solves on {campaign.shape[0]}^3 "
-             f"voxels, {n_workers} workers)")
-        solves, failed = _execute(client, campaign, todo, store, progress)
+             f"voxels, {counted(n_workers, 'worker')})")
+        solves, failed, written = _execute(client, campaign, todo, store, progress)
     finally:
         client.close()
         if cluster is not None:
             cluster.close()
+    missing = sorted(t for t in written if not store.part_path(t).is_file())
+    if missing:
+        raise CampaignError(f"{len(missing)} tasks reported done have no part file in "
+                            f"{str(store.folder / 'parts')!r}: {', '.join(missing)}")
     summary = RunSummary(len(todo) - failed, len(tasks) - len(todo), failed, solves,
                          time.perf_counter() - t0, n_workers)
     echo(f"campaign {campaign.name}: {summary.tasks_run} tasks ({solves} solves) in "
-         f"{summary.wall_s:.1f} s on {n_workers} workers; {failed} failed")
+         f"{summary.wall_s:.1f} s on {counted(n_workers, 'worker')}; {failed} failed")
     return summary
 
 
-def _wait_for_workers(client, scheduler: str | None) -> int:
-    """Number of workers, waiting up to 60 s for a first one on an external scheduler."""
-    n = len(client.scheduler_info().get("workers", {}))
-    if n:
-        return n
+def _ready_workers(client, scheduler: str | None, campaign: Campaign) -> int:
+    """Number of workers once the cluster can run the campaign's solver
+    (:func:`surrogate.engine.ready_workers`: a first worker within 60 s, a GPU worker for a
+    GPU solver); a CampaignError before anything is submitted otherwise."""
+    from .engine import ready_workers
+
     try:
-        client.wait_for_workers(1, timeout=60)
-    except TimeoutError:
-        raise CampaignError(f"--scheduler: no worker joined {scheduler!r} within 60 s; start "
-                            "workers with 'dask worker ADDRESS'") from None
-    return len(client.scheduler_info().get("workers", {}))
+        return ready_workers(client, scheduler, campaign.solver)
+    except ValueError as err:
+        raise CampaignError(str(err)) from None
 
 
 def _execute(client, campaign: Campaign, todo: list[Task], store: CampaignStore,
-             progress: bool) -> tuple[int, int]:
-    """Submit the tasks, record each failure, show progress; returns (solves, failures)."""
+             progress: bool) -> tuple[int, int, list[str]]:
+    """Submit the tasks, write each finished task's part here on the client, record each
+    failure, show progress; returns (solves, failures, the tasks written)."""
     from dask.distributed import as_completed
     from tqdm import tqdm
 
-    spec = campaign.to_dict()
-    prefix = f"itr-{campaign.fingerprint()[:8]}-"
     from .solver_choice import worker_resources
 
+    spec = campaign.to_dict()
+    prefix = f"itr-{campaign.fingerprint()[:8]}-"
     resources = worker_resources(campaign.solver)
-    futures = [client.submit(run_task, spec, _task_dict(t), str(store.folder),
-                             key=prefix + t.task_id, pure=False, resources=resources)
+    futures = [client.submit(run_task, spec, _task_dict(t), key=prefix + t.task_id,
+                             pure=False, resources=resources)
                for t in todo]
     failed = solves = 0
+    written: list[str] = []
     with tqdm(total=len(todo), unit="task", disable=not progress, desc=campaign.name) as bar:
         for fut in as_completed(futures):
+            task_id = str(fut.key)[len(prefix):]
             try:
-                solves += fut.result()["solves"]
+                result = fut.result()
             except Exception as exc:  # noqa: BLE001 - a task's failure is recorded, not fatal
                 failed += 1
-                store.record_failure(str(fut.key)[len(prefix):], f"{type(exc).__name__}: {exc}")
+                store.record_failure(task_id, f"{type(exc).__name__}: {exc}")
+            else:
+                write_task_result(store, result)  # a write error here is fatal: loud
+                written.append(result["task_id"])
+                solves += result["solves"]
+            fut.release()  # its rows are on disk: free them on the worker and here
             bar.update(1)
             bar.set_postfix(solves=solves, failed=failed)
-    return solves, failed
+    return solves, failed, written
 
 
 def _task_dict(task: Task) -> dict:

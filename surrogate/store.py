@@ -90,11 +90,13 @@ class CampaignStore:
     Parameters
     ----------
     folder : path
-        The campaign folder.
+        The campaign folder; made absolute at once (in this process's working directory),
+        so that a later change of directory moves nothing, and messages name it as given.
     """
 
     def __init__(self, folder: str | Path) -> None:
-        self.folder = Path(folder)
+        self.folder = Path(folder).absolute()
+        self._shown = str(folder)
 
     # ------------------------------------------------------------------ campaign
     @property
@@ -113,12 +115,12 @@ class CampaignStore:
         if self.campaign_file.exists():
             held = json.loads(self.campaign_file.read_text())
             if held.get("fingerprint") != campaign.fingerprint():
-                raise CampaignError(f"--out: {str(self.folder)!r} holds another campaign "
+                raise CampaignError(f"--out: {self._shown!r} holds another campaign "
                                     f"({held.get('campaign', {}).get('name')!r}); use a new "
                                     "folder")
             return True
         if self.folder.exists() and any(self.folder.iterdir()):
-            raise CampaignError(f"--out: {str(self.folder)!r} is not empty and holds no "
+            raise CampaignError(f"--out: {self._shown!r} is not empty and holds no "
                                 "campaign; use a new folder")
         return False
 
@@ -137,7 +139,7 @@ class CampaignStore:
     def campaign(self) -> Campaign:
         """The campaign this folder holds."""
         if not self.campaign_file.exists():
-            raise CampaignError(f"{str(self.folder)!r} holds no campaign (no campaign.json)")
+            raise CampaignError(f"{self._shown!r} holds no campaign (no campaign.json)")
         return Campaign.from_dict(json.loads(self.campaign_file.read_text())["campaign"])
 
     # --------------------------------------------------------------------- parts
@@ -205,7 +207,7 @@ class CampaignStore:
         """All finished rows, sorted by formulation, replica and parameter set."""
         files = [self.part_path(t) for t in sorted(self.done_tasks())]
         if not files:
-            raise CampaignError(f"{str(self.folder)!r} has no finished solve yet")
+            raise CampaignError(f"{self._shown!r} has no finished solve yet")
         table = pa.concat_tables([pq.read_table(f) for f in files], promote_options="default")
         return table.sort_by([(k, "ascending") for k in RESULT_KEY])
 

@@ -135,6 +135,15 @@ def test_gpu_solves_go_only_to_workers_that_declare_a_gpu(rves):
 
     req = SolveRequest.for_materials(rves[0][1], MAT, 1e-8, solver="gpu")
     with LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
+                      dashboard_address=None) as plain:
+        # the engine refuses at once, before submitting anything (never a silent wait)
+        with SolveEngine(scheduler=plain.scheduler_address, echo=lambda s: None) as engine:
+            with pytest.raises(ValueError, match=r"none of the 1 workers .* declares the "
+                               r"resource GPU; start GPU workers with 'dask worker .* "
+                               r"--resources GPU=1'"):
+                engine.solve([req])
+            assert engine.solved == 0 and not plain.scheduler.tasks
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
                       dashboard_address=None) as plain, Client(plain) as client:
         fut = client.submit(eng._run_payload, eng._payload(req), pure=False,
                             resources=worker_resources("gpu"))
@@ -149,3 +158,48 @@ def test_gpu_solves_go_only_to_workers_that_declare_a_gpu(rves):
         with SolveEngine(scheduler=gpu.scheduler_address, echo=lambda s: None) as engine:
             with pytest.raises(ValueError, match="device: 'cuda'"):
                 engine.solve([req])
+
+
+def test_a_local_cluster_for_gpu_solves_is_refused_where_there_is_no_gpu(rves, tmp_path):
+    """The real device count (no CuPy, no GPU here): a one-line refusal naming the solver,
+    from the one place that makes clusters, before any cluster starts or task is submitted
+    -- for the engine and for a campaign alike."""
+    from itr_surrogate.campaign import Campaign, CampaignError
+    from itr_surrogate.runner import run_campaign
+
+    if eng.cuda_device_count() > 0:
+        pytest.skip("this machine has a GPU: the local cluster would get GPU workers")
+    with pytest.raises(ValueError, match=r"^solver 'gpu' solves on a GPU, but this machine "
+                       r"has no CUDA device .* choose another solver") as info:
+        eng.open_client(None, None, memory_per_worker=10**9, solver="gpu")
+    assert "\n" not in str(info.value)
+    req = SolveRequest.for_materials(rves[0][1], MAT, 1e-8, solver="gpu")
+    with SolveEngine(tmp_path / "s", workers=1, echo=lambda s: None) as engine:
+        with pytest.raises(ValueError, match="no CUDA device"):
+            engine.solve([req])
+        assert engine._client is None and engine.solved == 0  # no cluster was started
+    camp = Campaign.from_dict({
+        "name": "g", "box_um": 4.0, "voxel_um": 0.25, "replicas": 1, "seed": 1,
+        "solver": "gpu", "formulation": [{"name": "Al2O3-30", "fractions": {"Al2O3": 0.3}}],
+        "design": {"kind": "grid", "values": {"R_Al2O3_silicone": [1e-8]}}})
+    with pytest.raises(CampaignError, match="solver 'gpu' solves on a GPU"):
+        run_campaign(camp, tmp_path / "c", progress=False, echo=lambda s: None)
+    assert not (tmp_path / "c").exists()
+
+
+def test_a_local_cluster_for_gpu_solves_declares_one_gpu_worker_per_device(monkeypatch):
+    """With one CUDA device (the count faked: CI has none), the LocalCluster for solver
+    "gpu" has one worker, however many were asked for, and it declares GPU=1; a CPU
+    solver's cluster declares none."""
+    monkeypatch.setattr(eng, "cuda_device_count", lambda: 1)
+    client, cluster = eng.open_client(3, None, memory_per_worker=10**9, solver="gpu",
+                                      echo=lambda s: None)
+    try:
+        workers = client.scheduler_info()["workers"]
+        assert [w["resources"] for w in workers.values()] == [{"GPU": 1}]
+        assert eng.ready_workers(client, None, "gpu") == 1
+        assert eng.ready_workers(client, None, "fft") == 1
+    finally:
+        client.close()
+        cluster.close()
+    assert eng.needs_gpu("gpu") and not eng.needs_gpu("fft") and not eng.needs_gpu("mg")
