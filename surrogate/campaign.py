@@ -10,7 +10,16 @@ starts; an error names the key. The file::
     replicas = 2                   # RVEs per formulation (seeds seed, seed + 1, ...)
     seed = 1
     contact = "gap"                # "gap" (default) or "area" (the paper's per-area R_ff)
-    solver = "fft"                 # "fft" (default), "fv", "auto" or a backend name
+    solver = "fft"                 # one of (surrogate.solver_choice):
+                                   #  "fft" (default) numba FFT-PCG on the CPU;
+                                   #  "mg"  the same, multigrid-preconditioned (high
+                                   #        contrast, resistive interfaces);
+                                   #  "gpu" array-API PCG on a CUDA device: a local
+                                   #        cluster gets one worker per GPU; an external
+                                   #        one needs 'dask worker ADDR --resources GPU=1';
+                                   #  "fv"  the pyamg finite-volume reference (slower);
+                                   #  "auto" the cheaper of fft/fv for the grid (fft);
+                                   #  or a registered backend name, e.g. "scipy_fft"
     tol = 1e-6                     # relative residual of every solve
     block_size = 8                 # parameter sets per task (one RVE geometry per task)
     max_diameter_box_ratio = 0.45  # largest particle diameter / box
@@ -55,6 +64,7 @@ from typing import Any
 import numpy as np
 
 from itr_fv import Materials, paper_data
+from itr_fv.formulation_names import UnknownFormulationError, formulation_name
 from itr_fv.paper_data import PAPER_SYSTEM, TABLE1
 from itr_fv.rve import FillerSpec, packing_limit
 from itr_fv.rve_spec import RVESpec
@@ -138,7 +148,7 @@ class Campaign:
         """Read and check a campaign file (CampaignError naming the file and key)."""
         p = Path(path)
         try:
-            data = tomllib.loads(p.read_text(encoding="utf-8"))
+            data = tomllib.loads(p.read_text(encoding="utf-8-sig"))  # a BOM is fine
         except FileNotFoundError:
             raise CampaignError(f"{p}: no such campaign file") from None
         except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
@@ -333,11 +343,14 @@ def _formulation(entry: Any, i: int) -> Formulation:
     table2 = paper_data.formulations()
     if "fractions" in entry:
         fractions = entry["fractions"]
-    elif name in table2:
-        fractions = table2[name]
     else:
-        raise CampaignError(f"formulation {name!r}: no fractions given and not a Table 2 "
-                            f"formulation ({', '.join(table2)})")
+        try:  # a Table 2 name in any letter case; a near miss gets a "did you mean"
+            name = formulation_name(name, known=table2)
+        except UnknownFormulationError as exc:
+            hint = f"; did you mean {exc.suggestion!r}?" if exc.suggestion else ""
+            raise CampaignError(f"formulation {name!r}: no fractions given and not a Table 2 "
+                                f"formulation{hint} ({', '.join(table2)})") from None
+        fractions = table2[name]
     if not isinstance(fractions, dict) or not fractions:
         raise CampaignError(f"formulation {name!r}: fractions must be a table {{filler: "
                             "volume fraction}")

@@ -154,13 +154,16 @@ def test_warm_start_and_geometry_reuse_give_the_cold_answer(tmp_path):
     import numpy as np
 
     import itr_fft
-    from itr_surrogate.runner import campaign_rve, run_task
+    from itr_surrogate.runner import campaign_rve, run_task, write_task_result
 
     camp = Campaign.from_dict({**_small_dict(), "block_size": 6, "replicas": 1})
     CampaignStore(tmp_path).open_for(camp)
     task = camp.tasks()[0]
-    run_task(camp.to_dict(), {**task.__dict__, "set_indices": list(task.set_indices)},
-             str(tmp_path))
+    # the task writes nothing itself: it returns its rows and RVE for the client to write
+    result = run_task(camp.to_dict(), {**task.__dict__, "set_indices": list(task.set_indices)})
+    assert CampaignStore(tmp_path).done_tasks() == set()
+    assert len(result["rows"]) == result["solves"] == 6
+    write_task_result(CampaignStore(tmp_path), result)
     got = CampaignStore(tmp_path).results().to_pylist()
     assert [r["warm_start"] for r in got] == [False] + [True] * 5
     ms = campaign_rve(camp, task.formulation, task.replica).microstructure
@@ -194,6 +197,8 @@ BAD = [
     (lambda d: d.update(base={"Rff_Al2O3_Al2O3": 1e-7}), "contact='area'"),
     (lambda d: d.update(replicas=0), "replicas"),
     (lambda d: d.update(formulation=[{"name": "Al2O3-99"}]), "not a Table 2 formulation"),
+    (lambda d: d.update(formulation=[{"name": "Al203-60"}]),
+     "not a Table 2 formulation; did you mean 'Al2O3-60'?"),
     (lambda d: d.update(design={"kind": "grid", "values": {"R_silicone_Al2O3": [1e-8]}}),
      "sorted order"),
     (None, "not valid TOML"),
@@ -272,6 +277,17 @@ EXAMPLES = {"campaign-tiny.toml": 12, "campaign-paper-al2o3.toml": 4 * 3 * 40,
             "campaign-paper-aln.toml": 4 * 3 * 40, "campaign-paper-hybrid.toml": 4 * 3 * 64}
 
 
+def test_a_campaign_file_as_a_spreadsheet_or_windows_editor_saves_it(tmp_path):
+    """A UTF-8 byte-order mark and a Table 2 name in another letter case are accepted."""
+    d = _small_dict()
+    d["formulation"] = [{"name": "al2o3-60"}]
+    (tmp_path / "c.toml").write_text(_dump(d), encoding="utf-8-sig")
+    assert (tmp_path / "c.toml").read_bytes()[:3] == b"\xef\xbb\xbf"
+    camp = Campaign.from_toml(tmp_path / "c.toml")
+    [form] = camp.formulations
+    assert form.name == "Al2O3-60" and form.fractions == {"Al2O3": pytest.approx(0.60)}
+
+
 @pytest.mark.parametrize("name,solves", EXAMPLES.items(), ids=list(EXAMPLES))
 def test_shipped_example_campaigns_are_valid(name, solves):
     camp = Campaign.from_toml(ROOT / "examples" / name)
@@ -288,10 +304,10 @@ def test_a_failed_task_is_recorded_and_the_others_finish(tmp_path, monkeypatch):
     camp = Campaign.from_dict({**_small_dict(), "replicas": 1, "block_size": 3})
     real = runner.run_task
 
-    def flaky(spec, task, folder):
+    def flaky(spec, task):
         if task["block"] == 1:
             raise RuntimeError("injected failure")
-        return real(spec, task, folder)
+        return real(spec, task)
 
     with LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
                       dashboard_address=None) as cluster:

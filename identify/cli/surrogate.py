@@ -35,8 +35,16 @@ def _formulation_rows(store, name: str | None):
         if len(names) > 1:
             raise CLIError(f"--formulation: the campaign holds {names}; name one", 2)
         name = names[0]
-    elif name not in names:
-        raise CLIError(f"--formulation: {name!r} is not in the campaign (it holds {names})", 2)
+    else:
+        from ..inference.formulations import formulation_name
+
+        try:
+            name = formulation_name(name, names)  # any letter case; a near miss suggested
+        except ValueError as exc:
+            hint = (f"; did you mean {exc.suggestion!r}?"
+                    if getattr(exc, "suggestion", None) else "")
+            raise CLIError(f"--formulation: {name!r} is not in the campaign (it holds "
+                           f"{names}){hint}", 2) from None
     mask = np.array([f == name for f in table.column("formulation").to_pylist()])
     return name, table.filter(mask)
 
@@ -132,7 +140,8 @@ def _show(args: argparse.Namespace) -> int:
         model = PrototypeRegressor.load(path)
     except (ValueError, json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise CLIError(f"FILE: {args.file!r} is not a surrogate file ({exc})", 2) from None
-    print(f"prototype model of {len(model.feature_names_in_)} features "
+    n = len(model.feature_names_in_)
+    print(f"prototype model of {n} feature{'' if n == 1 else 's'} "
           f"({', '.join(model.feature_names_in_)}), training R^2 {model.r2_:.5f}")
     print(model.to_expression())
     return 0
@@ -151,7 +160,8 @@ def add_parser(sub) -> None:
     fit.add_argument("--model", choices=_MODELS, default="prototype",
                      help="prototype (default) or reduced-basis")
     fit.add_argument("--formulation", default=None,
-                     help="formulation to fit (needed when the campaign holds several)")
+                     help="formulation to fit, in any letter case (needed when the campaign "
+                     "holds several)")
     fit.add_argument("--replica", type=number(int, 0, None, lo_open=False), default=0,
                      help="RVE replica of the reduced basis (default 0)")
     fit.add_argument("--tol", type=number(float, 1e-12, 0.5, lo_open=False), default=1e-3,

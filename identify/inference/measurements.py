@@ -11,10 +11,14 @@ Two kinds of CSV file:
   thicknesses. The contact resistance between sample and meter bars is the intercept of
   ``I = a t + b`` (Eq. 8), so ``K = 1 / a`` (Eq. 10) with the slope's standard error.
 
-Every formulation needs at least two replicates that differ (their variance enters the
-likelihood of :mod:`itr_identify.inference.calibrate`). Formulation names are those of
-:func:`~itr_identify.inference.formulations.fractions_of` (Table 2 or ``<filler>-<vol%>``),
-as on the command line. Values are checked for physical sense while they are read
+Files are read as spreadsheets save them: UTF-8 with or without a byte-order mark ("CSV
+UTF-8"), any line endings. Every formulation needs at least two replicates that differ (their
+variance enters the likelihood of :mod:`itr_identify.inference.calibrate`). Formulation names
+are those of :func:`~itr_identify.inference.formulations.fractions_of` (Table 2 or
+``<filler>-<vol%>``), as on the command line, matched by
+:func:`~itr_identify.inference.formulations.formulation_name`: in any letter case (the
+canonical spelling is kept), and a near miss (``Al203-60``) is refused with a "did you mean".
+Values are checked for physical sense while they are read
 (:mod:`~itr_identify.inference.plausibility`: a conductivity no resistance can reach, a
 thickness that is no sample's), before any solve. Errors are ValueErrors that name the file,
 the line and the column.
@@ -30,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .formulations import fractions_of
+from .formulations import formulation_name, fractions_of
 from .plausibility import check_conductivity, check_thickness
 
 __all__ = ["Measurements", "read_measurements", "read_tester_readings",
@@ -97,12 +101,21 @@ class Measurements:
 
 
 def _read_text(path: Path) -> str:
+    """The text of a user's file: UTF-8, a byte-order mark (a spreadsheet's "CSV UTF-8")
+    dropped."""
     try:
-        return path.read_text(encoding="utf-8")
+        data = path.read_bytes()
     except FileNotFoundError:
         raise ValueError(f"path: {str(path)!r} does not exist") from None
+    except IsADirectoryError:
+        raise ValueError(f"path: {str(path)!r} is a folder, not a file") from None
+    try:
+        return data.decode("utf-8-sig")
     except UnicodeDecodeError:
-        raise ValueError(f"path: {str(path)!r} is not a UTF-8 text file") from None
+        utf16 = data.startswith((b"\xff\xfe", b"\xfe\xff"))
+        raise ValueError(f"path: {str(path)!r} is not a UTF-8 text file"
+                         + (" (it is UTF-16, a spreadsheet's 'Unicode text')" if utf16 else "")
+                         + "; save it as 'CSV UTF-8'") from None
 
 
 def _rows(path: Path, text: str, columns: tuple[str, ...]) -> list[tuple[int, dict[str, str]]]:
@@ -141,17 +154,15 @@ def _number(path: Path, line: int, row: dict, column: str, *, positive: bool = T
     return v
 
 
-def _check_formulation(path: Path, line: int, name: str, known) -> None:
+def _formulation(path: Path, line: int, name: str, known) -> str:
+    """The canonical name of the formulation cell ``name`` (see
+    :func:`~itr_identify.inference.formulations.formulation_name`)."""
     if not name:
         raise ValueError(f"{path.name} line {line}: empty formulation")
-    if callable(known):
-        try:
-            known(name)
-        except ValueError as exc:
-            raise ValueError(f"{path.name} line {line}: {exc}") from None
-    elif known is not None and name not in known:
-        raise ValueError(f"{path.name} line {line}: unknown formulation {name!r} (known: "
-                         f"{', '.join(sorted(known))})")
+    try:
+        return formulation_name(name, known)
+    except ValueError as exc:
+        raise ValueError(f"{path.name} line {line}: {exc}") from None
 
 
 def _finish(path: Path, values: dict[str, list[float]], source: str,
@@ -183,19 +194,22 @@ def read_measurements(path: str | Path | None = None, *,
     Parameters
     ----------
     path : str or Path, optional
-        CSV with columns ``formulation,replicate,k_W_per_mK`` and optionally
-        ``thickness_mm`` (then on every row).
+        CSV (UTF-8, a byte-order mark allowed) with columns
+        ``formulation,replicate,k_W_per_mK`` and optionally ``thickness_mm`` (then on every
+        row).
     formulations : set of str or callable, optional
         Names the table may use, or a function that raises ValueError for a name it does not
         accept (default: :func:`itr_identify.inference.formulations.fractions_of`, the
-        command line's: Table 2 names and ``<filler>-<vol%>`` pairs).
+        command line's: Table 2 names and ``<filler>-<vol%>`` pairs). Matched in any letter
+        case; the result is keyed by the canonical spelling (``al2o3-55`` -> ``Al2O3-55``).
 
     Raises
     ------
     ValueError
         Naming file, line and column: missing column (or a separator other than the comma),
         non-numeric, NaN, zero or negative k, k above what any resistance allows, unknown or
-        fraction-like formulation, a replicate given twice, fewer than 2 replicates or
+        fraction-like formulation (a near miss such as ``Al203-60`` with "did you mean
+        'Al2O3-60'?"), a replicate given twice, fewer than 2 replicates or
         identical ones, a missing, non-positive or implausible thickness where the column
         exists.
 
@@ -218,8 +232,7 @@ def read_measurements(path: str | Path | None = None, *,
     rows = _rows(p, text, TABLE_COLUMNS)
     with_thickness = THICKNESS_COLUMN in rows[0][1]
     for line, row in rows:
-        name = row["formulation"]
-        _check_formulation(p, line, name, known)
+        name = _formulation(p, line, row["formulation"], known)
         rep = row["replicate"]
         if (name, rep) in seen:
             raise ValueError(f"{p.name} line {line}: replicate {rep!r} of {name!r} given twice")
@@ -286,8 +299,7 @@ def read_tester_readings(path: str | Path, *,
     known = _known(formulations)
     samples: dict[tuple[str, str], list[tuple[int, float, float]]] = {}
     for line, row in _rows(p, _read_text(p), READING_COLUMNS):
-        name = row["formulation"]
-        _check_formulation(p, line, name, known)
+        name = _formulation(p, line, row["formulation"], known)
         t_mm = _number(p, line, row, "thickness_mm")
         check_thickness(f"{p.name} line {line}", t_mm)
         t = t_mm * 1e-3
