@@ -82,3 +82,80 @@ def test_stage_attributes_match_their_dict_form(posterior):
     assert hybrid["carried"] == ["R_Al2O3_silicone", "R_AlN_silicone"]
     assert posterior.to_dict()["identifiability"] == [s.identifiability
                                                       for s in posterior.stages]
+
+
+def _piled_up_at_the_upper_end() -> Posterior:
+    """One AlN formulation measured below what any resistance of the prior gives: the
+    posterior rises to the prior's upper end (1e-5) and piles up there, broadly enough that
+    the equal-tailed 90 % interval stops short of that end (the area parametrisation's
+    R_AlN_silicone in `itr reproduce`: best 1.00e-5, interval up to 9.90e-6)."""
+    models = {"AlN-60": _StubModel("AlN-60")}
+    k = 2.0 - 0.3 * (-4.8 + 7.0)                 # the stub's k at R = 10^-4.8
+    meas = Measurements({"AlN-60": k + np.array([-0.3, 0.3, -0.2, 0.2])}, "stub")
+    return calibrate(models, meas, grid_points=121, n_samples=4000)
+
+
+def test_a_best_value_at_the_prior_end_is_inside_its_interval():
+    post = _piled_up_at_the_upper_end()
+    name = "R_AlN_silicone"
+    best = post.best[name]
+    assert best == pytest.approx(1e-5)
+    # the equal-tailed interval of the samples misses the best value ...
+    assert 10 ** np.quantile(post.samples[:, 0], 0.95) < best
+    # ... the reported one holds it: one-sided, from the 10 % quantile to the prior's end
+    lo, hi = post.interval(name)
+    assert lo <= best <= hi
+    assert lo == pytest.approx(10 ** np.quantile(post.samples[:, 0], 0.10), rel=0.05)
+    entry = post.to_dict()["parameters"][name]
+    assert entry["interval_90"][0] <= entry["best"] <= entry["interval_90"][1]
+    assert post.prior_ends(name) == (False, True)
+    assert post.determination(name) == "at the prior's edge"
+
+
+def test_identifiability_statement_agrees_with_the_flags():
+    """The posterior's spread is below half the prior's (the direction counts as
+    determined), but the interval reaches the prior's end: the statement must not say
+    that every parameter is determined."""
+    post = _piled_up_at_the_upper_end()
+    ia = post.stages[0].identifiability
+    assert all(d["determined"] for d in ia["directions"])
+    assert ia["parameters"] == {"R_AlN_silicone": "at the prior's edge"}
+    assert "every parameter" not in ia["statement"]
+    assert "R_AlN_silicone is bounded from below only" in ia["statement"]
+    # and a determined parameter is said to be
+    forms = ("Al2O3-60",)
+    models = {f: _StubModel(f) for f in forms}
+    meas = Measurements({"Al2O3-60": 2.0 + np.array([-0.02, 0.01, 0.02, -0.01])}, "stub")
+    ok = calibrate(models, meas, grid_points=61, n_samples=500)
+    assert ok.determination("R_Al2O3_silicone") == "determined"
+    assert ok.stages[0].identifiability["statement"] == (
+        "every parameter and combination is determined by the data")
+
+
+@pytest.mark.parametrize("best, expect", [
+    (-7.0, (-7.0 - 1.645 * 0.3, -7.0 + 1.645 * 0.3)),   # inside: the equal-tailed interval
+    (None, (-7.0 - 1.645 * 0.3, -7.0 + 1.645 * 0.3)),
+])
+def test_credible_interval_is_equal_tailed_where_the_best_value_is_inside(best, expect):
+    from itr_identify.inference.calibrate import credible_interval
+
+    x = np.random.default_rng(1).normal(-7.0, 0.3, 200_000)
+    assert credible_interval(x, best) == pytest.approx(expect, abs=0.01)
+
+
+def test_credible_interval_moves_to_hold_a_best_value_in_a_tail():
+    from itr_identify.inference.calibrate import credible_interval
+
+    x = np.random.default_rng(2).normal(0.0, 1.0, 200_000)
+    for best in (1.8, -1.8, 3.0, 6.0, -6.0):
+        lo, hi = credible_interval(x, best)
+        assert lo <= best <= hi
+        inside = np.mean((x >= lo) & (x <= hi))
+        assert inside >= 0.9 - 1e-3                           # the mass is kept
+    # a best value in the upper 5 % tail (3.6 % above it): moved just far enough, the upper
+    # end at it and the lower tail 10 - 3.6 = 6.4 %
+    lo, hi = credible_interval(x, 1.8)
+    assert hi == pytest.approx(1.8, abs=0.01) and lo == pytest.approx(-1.52, abs=0.02)
+    # beyond every sample: one-sided, from the 10 % quantile to the best value
+    lo, hi = credible_interval(x, 6.0)
+    assert hi == 6.0 and lo == pytest.approx(-1.2816, abs=0.02)

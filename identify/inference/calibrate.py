@@ -26,14 +26,20 @@ the hybrids do not feed back into the single-filler parameters). A stage may add
 two parameters.
 
 Per parameter the result holds the best value (the grid point of highest posterior), the
-posterior median and 90 % credible interval; per stage the correlation of log10 values and
-an identifiability statement: the principal directions of the posterior covariance whose
-spread is more than half the prior's are combinations the data do not separate.
+posterior median and 90 % credible interval (:func:`credible_interval`: equal-tailed, moved
+just far enough to hold the best value, so a best value is always inside its interval; where
+the posterior piles up at an end of the prior the interval is one-sided) and how far the data
+determine it (:meth:`Posterior.determination`: one rule for the headline's flags and the
+identifiability statements); per stage the correlation of log10 values and an
+identifiability statement: the parameters the data do not determine, and the principal
+directions of the posterior covariance whose spread is more than half the prior's
+(combinations the data do not separate).
 """
 
 from __future__ import annotations
 
 import copy
+import dataclasses
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -46,7 +52,8 @@ from ..forward.model import ForwardModel
 from .measurements import Measurements
 
 __all__ = ["Stage", "StageResult", "Posterior", "stages_of", "calibrate", "pooled_scatter",
-           "variance", "log_likelihood", "UNIDENTIFIED_RATIO"]
+           "variance", "log_likelihood", "credible_interval", "UNIDENTIFIED_RATIO",
+           "EDGE_FACTOR", "UNDETERMINED_DECADES", "DETERMINATIONS"]
 
 #: Depth (in log-likelihood) of the region that the second, refined grid covers.
 REFINE_DEPTH = 25.0
@@ -54,6 +61,51 @@ REFINE_DEPTH = 25.0
 #: A principal direction whose posterior spread exceeds this fraction of the prior's is
 #: reported as not determined by the data.
 UNIDENTIFIED_RATIO = 0.5
+
+#: An interval end or best value within this factor of a prior end counts as at that end.
+EDGE_FACTOR = 1.5
+#: A 90 % interval wider than this many decades determines nothing worth quoting.
+UNDETERMINED_DECADES = 2.0
+#: How far the data determine one parameter (:meth:`Posterior.determination`), the first
+#: that applies: its best value at an end of the prior (within :data:`EDGE_FACTOR`: the data
+#: pull it out of the range searched); its 90 % interval reaching both ends of the prior or
+#: wider than :data:`UNDETERMINED_DECADES` decades; reaching one end (bounded on one side
+#: only); none of these.
+DETERMINATIONS = ("at the prior's edge", "undetermined", "bounded on one side", "determined")
+
+
+def credible_interval(log_samples: np.ndarray, best_log10: float | None = None,
+                      level: float = 0.9) -> tuple[float, float]:
+    """The ``level`` credible interval of 1-D log10 samples, in log10: the equal-tailed one,
+    or, where ``best_log10`` (the best point's value) lies outside it, the interval of the
+    same mass moved just far enough to hold it.
+
+    The best point is the grid point of highest joint posterior (in a later stage: given the
+    earlier stages' best values), not a summary of the samples. Where the posterior piles
+    up at an end of the prior, that point is the prior's end while the equal-tailed interval
+    stops a tail short of it; where the joint maximum lies in a tail of the marginal (a
+    ridge), it can lie outside too. Moving the interval keeps its mass and puts the best value
+    inside; when the move reaches the samples' end the interval is one-sided (from the
+    ``1 - level`` quantile up to the best value, or from the best value to the ``level``
+    quantile)."""
+    x = np.asarray(log_samples, dtype=np.float64)
+    a = (1 - level) / 2
+    lo, hi = (float(v) for v in np.quantile(x, [a, 1 - a]))
+    if best_log10 is None or lo <= best_log10 <= hi:
+        return lo, hi
+    b = float(best_log10)
+    if b > hi:
+        above = min(float(np.mean(x > b)), a)          # the upper tail that may stay
+        lo, hi = (float(v) for v in np.quantile(x, [1 - level - above, 1 - above]))
+        return lo, max(hi, b)
+    below = min(float(np.mean(x < b)), a)
+    lo, hi = (float(v) for v in np.quantile(x, [below, below + level]))
+    return min(lo, b), hi
+
+
+def _reach(lo: float, hi: float, prior: tuple[float, float]) -> tuple[bool, bool]:
+    """Whether an interval (m^2 K/W) reaches the prior's lower and upper end."""
+    return lo <= prior[0] * EDGE_FACTOR, hi >= prior[1] / EDGE_FACTOR
 
 
 @dataclass(frozen=True)
@@ -181,11 +233,55 @@ class Posterior:
         return float(10 ** np.median(self.samples[:, self.names.index(name)]))
 
     def interval(self, name: str, level: float = 0.9) -> tuple[float, float]:
-        """Equal-tailed credible interval, m^2 K/W."""
+        """Credible interval, m^2 K/W: equal-tailed, moved where needed to hold the best
+        value (:func:`credible_interval`), so ``lo <= best[name] <= hi`` always."""
         x = self.samples[:, self.names.index(name)]
-        a = (1 - level) / 2
-        lo, hi = np.quantile(x, [a, 1 - a])
-        return float(10 ** lo), float(10 ** hi)
+        best = self.best.get(name)
+        lo, hi = credible_interval(x, None if best is None else math.log10(best), level)
+        lo, hi = float(10 ** lo), float(10 ** hi)
+        if best is not None:                 # exactly, past the round trip through log10
+            lo, hi = min(lo, best), max(hi, best)
+        return lo, hi
+
+    def prior_ends(self, name: str) -> tuple[bool, bool]:
+        """Whether the 90 % interval of ``name`` reaches the prior's lower and upper end
+        (within :data:`EDGE_FACTOR`)."""
+        return _reach(*self.interval(name), self.prior)
+
+    def determination(self, name: str) -> str:
+        """How far the data determine ``name``: one of :data:`DETERMINATIONS`. The one
+        rule behind the headline's flags and the stages' identifiability statements."""
+        p_lo, p_hi = self.prior
+        best = self.best[name]
+        if best <= p_lo * EDGE_FACTOR or best >= p_hi / EDGE_FACTOR:
+            return DETERMINATIONS[0]
+        lo, hi = self.interval(name)
+        low_end, high_end = self.prior_ends(name)
+        if (low_end and high_end) or math.log10(hi / lo) > UNDETERMINED_DECADES:
+            return DETERMINATIONS[1]
+        if low_end or high_end:
+            return DETERMINATIONS[2]
+        return DETERMINATIONS[3]
+
+    def describe(self, name: str) -> str | None:
+        """:meth:`determination` of ``name`` as a phrase; None where it is determined."""
+        d = self.determination(name)
+        if d == DETERMINATIONS[3]:
+            return None
+        low_end, high_end = self.prior_ends(name)
+        prior = f"the prior ({self.prior[0]:g} - {self.prior[1]:g} m^2 K/W)"
+        if d == DETERMINATIONS[0]:
+            end = "lower" if self.best[name] <= self.prior[0] * EDGE_FACTOR else "upper"
+            side = "above" if end == "lower" else "below"
+            return (f"{name} is bounded from {side} only: its best value lies at the {end} "
+                    f"end of {prior}, the data pull it out of the range searched")
+        if d == DETERMINATIONS[1]:
+            return (f"{name} is undetermined: its 90 % interval "
+                    + ("reaches both ends of " + prior if low_end and high_end else
+                       f"spans more than {UNDETERMINED_DECADES:g} decades"))
+        end, side = ("upper", "below") if high_end else ("lower", "above")
+        return (f"{name} is bounded from {side} only: its 90 % interval reaches the {end} "
+                f"end of {prior}")
 
     def central(self) -> dict[str, float]:
         """A central point of the posterior, m^2 K/W: the sample nearest the marginal
@@ -276,13 +372,26 @@ def _identifiability(names: Sequence[str], log_samples: np.ndarray,
         combo = " ".join(f"{c:+.2f} log10({n})" for c, n in zip(v, names) if abs(c) > 0.05)
         directions.append({"combination": combo, "posterior_to_prior_sd": ratio,
                            "determined": ratio <= UNIDENTIFIED_RATIO})
+    return {"directions": directions}
+
+
+def _statement(post: "Posterior", names: Sequence[str], directions: Sequence[dict]) -> dict:
+    """Per parameter its :meth:`Posterior.determination` and the stage's statement, which
+    says "every parameter and combination is determined" only where every parameter is
+    determined (the headline's flags, the same rule) and every direction is."""
+    parameters = {n: post.determination(n) for n in names}
+    parts = [t for t in (post.describe(n) for n in names) if t is not None]
     bad = [d["combination"] for d in directions if not d["determined"]]
     if bad:
-        text = ("the data do not separate: " + "; ".join(bad) +
-                f" (posterior spread > {UNIDENTIFIED_RATIO:g} of the prior's)")
-    else:
+        parts.append("the data do not separate: " + "; ".join(bad) +
+                     f" (posterior spread > {UNIDENTIFIED_RATIO:g} of the prior's)")
+    if not parts:
         text = "every parameter and combination is determined by the data"
-    return {"directions": directions, "statement": text}
+    else:
+        good = [n for n, d in parameters.items() if d == DETERMINATIONS[3]]
+        text = "; ".join(parts) + (
+            f"; determined: {', '.join(good)}" if good else "")
+    return {"parameters": parameters, "statement": text}
 
 
 def calibrate(models: Mapping[str, ForwardModel], measurements: Measurements, *,
@@ -394,4 +503,10 @@ def calibrate(models: Mapping[str, ForwardModel], measurements: Measurements, *,
             identifiability={"system": "+".join(stage.system),
                              **_identifiability(stage.new, new_samples, prior)},
             axes_log10=tuple(np.array(a) for a in axes), density=marg / marg.sum()))
-    return Posterior(names, samples, best, tuple(prior), stages_out)
+    post = Posterior(names, samples, best, tuple(prior))
+    # the statements judge each parameter by the posterior's own intervals and flags
+    post.stages = [st if not st.parameters else dataclasses.replace(
+        st, identifiability={**st.identifiability, **_statement(
+            post, st.parameters, st.identifiability["directions"])})
+        for st in stages_out]
+    return post

@@ -1,24 +1,33 @@
 """The headline of an identification: per parameter the best value, the 90 % interval and
-what kind of answer it is, and which parametrisation to quote and why.
+what kind of answer it is, which parametrisation to quote and why, and how far the fidelity
+the values were computed at lets one quote them.
 
 Printed at the end of ``itr reproduce`` / ``itr identify``, at the top of ``report.md``
 and under ``"headline"`` in ``identified.json``.
 
-Flags (one per parameter, the first that applies):
+Flags (one per parameter, the first that applies): the calibration's
+:meth:`~itr_identify.inference.calibrate.Posterior.determination` (the same rule writes the
+report's identifiability statements),
 
 - ``at the prior's edge``: the best value lies within :data:`EDGE_FACTOR` of an end of the
   prior: the data pull it out of the range searched;
 - ``undetermined``: the 90 % interval reaches both ends of the prior (within
   :data:`EDGE_FACTOR`), or spans more than :data:`UNDETERMINED_DECADES` decades;
 - ``bounded on one side``: the interval reaches one end of the prior;
-- ``voxel-specific``: a per-area contact resistance (``Rff``): determined, but a property
-  of the voxel it was identified at (``validation/results/resolution_area.md``);
-- ``determined``: none of these.
+
+then ``voxel-specific``: a per-area contact resistance (``Rff``): determined, but a property
+of the voxel it was identified at (``validation/results/resolution_area.md``); ``determined``:
+none of these.
+
+Which parametrisation to quote: :func:`parametrisation_choice`, the one rule that the
+headline and the report's model-selection section (:func:`itr_identify.reporting.report.
+selection_lines`) both print.
 
 Beside the flag, the combined factor of the error budget's effects that this fidelity
-leaves uncorrected (voxel bias, box beyond the box solved) and a caveat where it is larger
+leaves uncorrected (voxel bias, box beyond the box solved) and a mark where it is larger
 than the interval: a value can be determined at its fidelity and still move by more than its
-interval at a faithful one.
+interval at a faithful one. What that means for quoting is said once, in
+:func:`fidelity_note`.
 """
 
 from __future__ import annotations
@@ -29,59 +38,75 @@ from collections.abc import Mapping
 from itr_fv.parameters import parse_parameter
 
 from ..forward.fidelity import fidelity_name
+from ..inference.calibrate import EDGE_FACTOR, UNDETERMINED_DECADES
 from ..inference.pipeline import Identification
 from .error_budget import error_budget
 
-__all__ = ["parameter_flag", "prior_ends", "choose_parametrisation", "headline", "headline_lines",
-           "headline_markdown", "EDGE_FACTOR",
-           "UNDETERMINED_DECADES", "FLAGS"]
+__all__ = ["parameter_flag", "prior_ends", "choose_parametrisation", "parametrisation_choice",
+           "chi_square_per_dof", "fidelity_note", "headline", "headline_lines",
+           "headline_markdown", "EDGE_FACTOR", "UNDETERMINED_DECADES", "FLAGS", "BIC_MARGIN",
+           "INTERVAL_FACTOR_NOTE", "QUICK_TO_STANDARD"]
 
-#: An interval end or best value within this factor of a prior end counts as at that end.
-EDGE_FACTOR = 1.5
-#: A 90 % interval wider than this many decades determines nothing worth quoting.
-UNDETERMINED_DECADES = 2.0
 #: The error budget's effects that the RVE leaves out of the likelihood and that a higher
 #: fidelity removes: their combined factor on a resistance is set against its interval.
 UNCORRECTED = ("voxel bias (not corrected)", "box effect beyond the box solved")
 FLAGS = ("at the prior's edge", "undetermined", "bounded on one side", "voxel-specific",
          "determined")
+#: BIC difference from which one parametrisation is called better supported (Kass and
+#: Raftery's "positive evidence").
+BIC_MARGIN = 2.0
+#: What ``x/F`` after an interval means (the error budget's ``interval_half_width_factor``,
+#: ``F = sqrt(upper / lower)``).
+INTERVAL_FACTOR_NOTE = ("x/F is the 90 % interval's half-width as a factor: the interval "
+                        "runs from its geometric middle divided by F to its middle times F "
+                        "(F = sqrt(upper end / lower end))")
+#: The gap parametrisation's resistances at ``--fidelity standard`` over those at ``quick``
+#: on the shipped Table 3 (``validation/results/reproduce_fidelity.md``: R_Al2O3_silicone
+#: 2.84e-8 against 1.67e-8, R_AlN_silicone 1.56e-8 against 7.7e-9): the measured bias of the
+#: default level, stated in :func:`fidelity_note`.
+QUICK_TO_STANDARD = {"R_Al2O3_silicone": 2.84e-8 / 1.67e-8,
+                     "R_AlN_silicone": 1.56e-8 / 7.7e-9}
 
 
 def prior_ends(post, name: str) -> tuple[bool, bool]:
     """Whether the 90 % interval of ``name`` reaches the prior's lower and upper end
     (within :data:`EDGE_FACTOR`); ``post`` a :class:`~itr_identify.inference.calibrate.
-    Posterior`."""
-    p_lo, p_hi = post.prior
-    lo, hi = post.interval(name)
-    return lo <= p_lo * EDGE_FACTOR, hi >= p_hi / EDGE_FACTOR
+    Posterior` (:meth:`~itr_identify.inference.calibrate.Posterior.prior_ends`)."""
+    return post.prior_ends(name)
 
 
 def parameter_flag(ident: Identification, name: str) -> str:
     """The flag of parameter ``name`` of ``ident`` (one of :data:`FLAGS`)."""
-    post = ident.posterior
-    p_lo, p_hi = post.prior
-    lo, hi = post.interval(name)
-    best = post.best[name]
-    if best <= p_lo * EDGE_FACTOR or best >= p_hi / EDGE_FACTOR:
-        return FLAGS[0]
-    low_end, high_end = prior_ends(post, name)
-    if (low_end and high_end) or math.log10(hi / lo) > UNDETERMINED_DECADES:
-        return FLAGS[1]
-    if low_end or high_end:
-        return FLAGS[2]
-    if parse_parameter(name)[0] == "Rff" and ident.parametrisation == "area":
+    flag = ident.posterior.determination(name)
+    if (flag == "determined" and parse_parameter(name)[0] == "Rff"
+            and ident.parametrisation == "area"):
         return FLAGS[3]
-    return FLAGS[4]
+    return flag
 
 
 def _filler_matrix(name: str) -> bool:
     return parse_parameter(name)[0] == "R"
 
 
-def choose_parametrisation(bics: Mapping[str, float], flags: Mapping[str, Mapping[str, str]]
-                           ) -> tuple[str, str]:
-    """The parametrisation to quote and why: the lower BIC where its filler-matrix
-    resistances (``R_*``) are all determined, else the other one if its are.
+def chi_square_per_dof(ident: Identification) -> float:
+    """Chi-square at the best values over (formulations - parameters), at least 1."""
+    return ident.chi_square() / max(len(ident.models) - ident.n_parameters, 1)
+
+
+def choose_parametrisation(bics: Mapping[str, float], flags: Mapping[str, Mapping[str, str]],
+                           chi2_dof: Mapping[str, float] | None = None,
+                           voxel_um: float | None = None) -> dict:
+    """Which parametrisation the data support and which one to quote, and why: the one rule
+    of the headline and of the report's model-selection section.
+
+    Supported: the lower BIC, when lower by :data:`BIC_MARGIN` or more (else none).
+    Quoted: the supported one where its filler-matrix resistances (``R_*``) are all
+    ``determined``; else one whose are (the lower BIC among them); else the supported one
+    (or the lower BIC) with the warning to quote intervals, not best values. Where the
+    quoted one is not the supported one, ``why`` says so and why: what the better fit leaves
+    undetermined, that its per-area contact resistances (flag ``voxel-specific``) belong to
+    the voxel (``voxel_um``) and do not transfer to another resolution, and that the quoted
+    one's poorer fit (``chi2_dof``) is model error its intervals do not carry.
 
     Parameters
     ----------
@@ -89,54 +114,159 @@ def choose_parametrisation(bics: Mapping[str, float], flags: Mapping[str, Mappin
         BIC per parametrisation.
     flags : mapping of str to mapping of str to str
         Per parametrisation, the flag (:func:`parameter_flag`) of each parameter.
+    chi2_dof : mapping of str to float, optional
+        Chi-square per degree of freedom at the best values, per parametrisation.
+    voxel_um : float, optional
+        The voxel the values were identified at.
+
+    Returns
+    -------
+    dict
+        ``bic``, ``margin`` (BIC difference, None for one parametrisation), ``supported``
+        (or None), ``quote``, ``why`` (text, no final full stop) and ``agrees`` (whether the
+        quoted one is the supported one, or none is supported).
     """
     order = sorted(bics, key=bics.get)
+    fit = dict(chi2_dof or {})
 
     def usable(p: str) -> bool:
         return all(f == "determined" for n, f in flags[p].items() if _filler_matrix(n))
 
+    def left(p: str) -> str:
+        return ", ".join(f"{n} {f}" for n, f in flags[p].items()
+                         if _filler_matrix(n) and f != "determined")
+
+    out = {"bic": dict(bics), "margin": None, "supported": None}
     if len(order) == 1:
         p = order[0]
-        return p, ("the only parametrisation run" + ("" if usable(p) else
-                   "; its filler-matrix resistances are not all determined (flags)"))
-    best, other = order[0], order[1]
-    margin = bics[other] - bics[best]
-    if usable(best):
-        return best, (f"the data support it (BIC lower by {margin:.1f} than {other}) and its "
-                      "filler-matrix resistances are determined")
-    if usable(other):
-        bad = ", ".join(f"{n} {f}" for n, f in flags[best].items()
-                        if _filler_matrix(n) and f != "determined")
-        return other, (f"its filler-matrix resistances are determined; {best} fits better "
-                       f"(BIC lower by {margin:.1f}) but leaves {bad}")
-    return best, (f"the lower BIC (by {margin:.1f}); no parametrisation determines every "
-                  "filler-matrix resistance: quote the intervals, not the best values")
+        why = "the only parametrisation run" + (
+            "" if usable(p) else f"; it leaves {left(p)}: quote the intervals, not the best "
+                                 "values")
+        return {**out, "quote": p, "why": why, "agrees": True}
+    lowest, other = order[0], order[1]
+    margin = bics[other] - bics[lowest]
+    supported = lowest if margin >= BIC_MARGIN else None
+    out.update(margin=margin, supported=supported)
+    ok = [p for p in order if usable(p)]
+    if supported is not None and usable(supported):
+        return {**out, "quote": supported, "agrees": True,
+                "why": f"the data support it (BIC lower by {margin:.1f} than {other}) and its "
+                       "filler-matrix resistances are determined"}
+    if ok:
+        q = ok[0]
+        if supported is None:
+            why = (f"neither parametrisation is supported over the other (BIC difference "
+                   f"{margin:.1f}); {q} determines its filler-matrix resistances")
+            rest = [p for p in order if p != q and not usable(p)]
+            if rest:
+                why += "; " + "; ".join(f"{p} leaves {left(p)}" for p in rest)
+            return {**out, "quote": q, "why": why, "agrees": True}
+        s = supported
+        fits = f"BIC lower by {margin:.1f}"
+        if s in fit and q in fit:
+            fits += f"; chi-square/dof {fit[s]:.2f} against {fit[q]:.2f}"
+        why = (f"the data support {s} ({fits}), but it does not determine its "
+               f"filler-matrix resistances ({left(s)})")
+        voxel = [n for n, f in flags[s].items() if f == "voxel-specific"]
+        if voxel:
+            at = f"the {voxel_um:g} um voxel" if voxel_um else "the voxel"
+            why += (f", and its fit rests on per-area contact resistances ({', '.join(voxel)}) "
+                    f"that are properties of {at}, not of the materials, and do not transfer "
+                    "to another resolution")
+        why += f"; {q} determines them"
+        if q in fit and fit[q] > 2.0:
+            why += (f", but its poorer fit (chi-square/dof {fit[q]:.2f}) is model error that "
+                    "its 90 % intervals do not carry")
+        return {**out, "quote": q, "why": why, "agrees": False}
+    q = supported or lowest
+    what = ("the data support it" if supported else
+            f"the lower BIC, though not supported over {other} (difference {margin:.1f})")
+    if supported:
+        what += f" (BIC lower by {margin:.1f} than {other})"
+    return {**out, "quote": q, "agrees": True,
+            "why": f"{what}; no parametrisation determines every filler-matrix resistance "
+                   f"({q} leaves {left(q)}): quote the intervals, not the best values"}
+
+
+def parametrisation_choice(idents: Mapping[str, Identification],
+                           flags: Mapping[str, Mapping[str, str]] | None = None) -> dict:
+    """:func:`choose_parametrisation` of identifications (their BIC, flags, chi-square per
+    degree of freedom and voxel): the dict that the headline and the report's
+    model-selection section both print, plus ``chi2_dof``."""
+    if flags is None:
+        flags = {p: {n: parameter_flag(i, n) for n in i.posterior.names}
+                 for p, i in idents.items()}
+    chi2 = {p: chi_square_per_dof(i) for p, i in idents.items()}
+    voxel = next(iter(idents.values())).settings.voxel_um
+    return {**choose_parametrisation({p: i.bic() for p, i in idents.items()}, flags, chi2,
+                                     voxel), "chi2_dof": chi2}
 
 
 def _caveat(budget_entry: dict) -> dict:
     """``numerical_factor`` (the combined factor of the :data:`UNCORRECTED` effects on the
-    resistance, > 1 means the resistance would be higher) and a ``caveat`` when it exceeds
-    the 90 % interval's half-width factor."""
+    resistance, > 1 means the resistance would be higher), ``interval_factor`` (the 90 %
+    interval's half-width as a factor, ``x/F``: :data:`INTERVAL_FACTOR_NOTE`) and a
+    ``caveat`` when the first exceeds the second. What that means for quoting is said once,
+    by :func:`fidelity_note`, not per value."""
+    width = budget_entry["interval_half_width_factor"]
     factors = [budget_entry["factors"].get(k) for k in UNCORRECTED]
     factors = [f for f in factors if f is not None and f > 0]
     if not factors:
         return {}
     c = math.prod(factors)
-    width = budget_entry["interval_half_width_factor"]
-    out = {"numerical_factor": c}
+    out = {"numerical_factor": c, "interval_factor": width}
     if max(c, 1 / c) > width:
-        out["caveat"] = (f"the RVE's uncorrected voxel and box effects move it by x{c:.2f}, "
-                         f"more than its interval (x/{width:.2f}): quote it from a higher "
-                         "--fidelity")
+        out["caveat"] = (f"the uncorrected voxel and box effects (x{c:.2f}) exceed its "
+                         f"interval (x/{width:.2f})")
     return out
 
 
+def fidelity_note(settings, parameters: Mapping[str, object] | None = None,
+                  marked: bool = False) -> str:
+    """Once, at the top of the headline: what the values of this fidelity are good for. At
+    ``quick`` (no faithful correction) they are indicative, with the bias measured against
+    ``standard`` on the shipped data (:data:`QUICK_TO_STANDARD`, for the gap parameters of
+    ``parameters``) and what to run for values to quote; at a corrected level, what it still
+    leaves out. ``parameters``: per parametrisation its parameter names (default both
+    parametrisations, every parameter); ``marked``: whether some values carry a caveat
+    (marked ``*``)."""
+    s = settings
+    name = fidelity_name(s.faithful)
+    if parameters is None:
+        parameters = {"area": (), "gap": tuple(QUICK_TO_STANDARD)}
+    star = (" Values marked * would move by more than their 90 % interval under the voxel "
+            "and box effects this level leaves uncorrected (the factor is given; the error "
+            "budget has each effect)." if marked else "")
+    area = (f" The area parametrisation is corrected at no level: its values belong to its "
+            f"{s.voxel_um:g} um voxel and {s.box_um:g} um box." if "area" in parameters
+            else "")
+    if s.faithful is None:
+        known = [(n, r) for n, r in QUICK_TO_STANDARD.items() if n in parameters.get("gap", ())]
+        bias = ""
+        if known:
+            bias = (" The gap parametrisation's resistances read low: on the shipped Table 3, "
+                    "`--fidelity standard` gave " + " and ".join(
+                        f"{n} {r:.1f} times" for n, r in known)
+                    + " the `quick` value (validation/results/reproduce_fidelity.md).")
+        return (f"Fidelity `{name}` (the default): indicative values, not for quoting. The "
+                f"{s.box_um:g} um RVEs at {s.voxel_um:g} um voxels are not corrected for "
+                "their voxel bias or their box." + bias + star + area
+                + " For values to quote, run again with `--fidelity standard` (about 48 min "
+                "on 2 cores for `itr reproduce`).")
+    boxes = ", ".join(f"{f} {b:g} um" for f, b in s.faithful.boxes_um)
+    return (f"Fidelity `{name}`: the gap parametrisation's level is corrected on faithful "
+            f"RVEs (boxes {boxes}; voxel bias removed by Richardson over "
+            f"{s.faithful.voxel_um:g} and {s.faithful.coarse_voxel_um:g} um)." + star + area)
+
+
 def headline(idents: Mapping[str, Identification]) -> dict:
-    """The headline as plain JSON: ``quote`` (parametrisation), ``why``, ``fidelity`` and
-    per parametrisation and parameter ``best``, ``interval_90`` (m^2 K/W) and ``flag``."""
+    """The headline as plain JSON: ``quote`` (parametrisation), ``why``, ``supported`` (by
+    the BIC, or None), ``fidelity``, ``fidelity_note`` and per parametrisation and parameter
+    ``best``, ``interval_90`` (m^2 K/W) and ``flag``; ``quote`` and ``why`` are those of
+    the report's model-selection section (:func:`parametrisation_choice`)."""
     flags = {p: {n: parameter_flag(i, n) for n in i.posterior.names}
              for p, i in idents.items()}
-    quote, why = choose_parametrisation({p: i.bic() for p, i in idents.items()}, flags)
+    choice = parametrisation_choice(idents, flags)
     params = {p: {n: {"best": i.posterior.best[n], "interval_90": list(i.posterior.interval(n)),
                       "flag": flags[p][n], "unit": "m^2 K/W"}
                   for n in i.posterior.names} for p, i in idents.items()}
@@ -146,16 +276,34 @@ def headline(idents: Mapping[str, Identification]) -> dict:
                 params[p][n].update(_caveat(entry))
     s = next(iter(idents.values())).settings
     fidelity = fidelity_name(s.faithful)
-    return {"quote": quote, "why": why, "fidelity": fidelity,
+    marked = any("caveat" in e for ps in params.values() for e in ps.values())
+    return {"quote": choice["quote"], "why": choice["why"], "supported": choice["supported"],
+            "fidelity": fidelity,
+            "fidelity_note": fidelity_note(
+                s, {p: tuple(i.posterior.names) for p, i in idents.items()}, marked),
             "holds_at": f"{s.box_um:g} um box, {s.voxel_um:g} um voxels"
                         + ("" if s.faithful is None else
                            f", corrected on faithful RVEs ({fidelity})"),
             "parameters": params}
 
 
-def headline_lines(head: dict) -> list[str]:
-    """:func:`headline` as plain-text lines (the terminal and the top of ``report.md``)."""
-    lines = []
+def _legend(head: dict) -> str:
+    marked = any("caveat" in e for ps in head["parameters"].values() for e in ps.values())
+    return (f"Flags: determined; bounded on one side (the 90 % interval reaches one end of "
+            f"the prior: the data bound the value from one side only); undetermined (both "
+            f"ends, or wider than {UNDETERMINED_DECADES:g} decades); at the prior's edge (the "
+            "best value is, and the interval reaches it); voxel-specific (a per-area contact "
+            "value, a property of the voxel)." + (f" {INTERVAL_FACTOR_NOTE}." if marked else ""))
+
+
+def headline_lines(head: dict, width: int = 100) -> list[str]:
+    """:func:`headline` as plain-text lines (the terminal): the fidelity note once, the
+    values, which parametrisation to quote and why, the legend."""
+    import textwrap
+    from functools import partial
+
+    wrap = partial(textwrap.wrap, width=width, break_on_hyphens=False)
+    lines = wrap(head["fidelity_note"])
     for par, params in head["parameters"].items():
         mark = "  <- quote" if par == head["quote"] else ""
         lines.append(f"{par}:{mark}")
@@ -164,16 +312,16 @@ def headline_lines(head: dict) -> list[str]:
             lines.append(f"  {n} = {e['best']:.2e} m^2 K/W (90 % interval {lo:.2e} - "
                          f"{hi:.2e}; {e['flag']})")
             if "caveat" in e:
-                lines.append(f"    caveat: {e['caveat']}")
-    lines.append(f"quote {head['quote']}: {head['why']}.")
-    lines.append(f"These hold at fidelity {head['fidelity']} ({head['holds_at']}); the "
-                 "report's error budget gives what the RVE leaves out.")
+                lines.append(f"    * {e['caveat']}")
+    lines += wrap(f"quote {head['quote']}: {head['why']}.")
+    lines += wrap(f"These hold at fidelity {head['fidelity']} ({head['holds_at']}); the "
+                  "report's error budget gives what the RVE leaves out. " + _legend(head))
     return lines
 
 
 def headline_markdown(head: dict) -> list[str]:
     """:func:`headline` as the first section of ``report.md``."""
-    lines = ["## Headline", "",
+    lines = ["## Headline", "", head["fidelity_note"], "",
              "| parametrisation | parameter | best (m^2 K/W) | 90 % interval | flag | "
              "uncorrected voxel and box effects |",
              "|---|---|---|---|---|---|"]
@@ -183,14 +331,11 @@ def headline_markdown(head: dict) -> list[str]:
             lo, hi = e["interval_90"]
             c = e.get("numerical_factor")
             effect = "-" if c is None else f"x{c:.2f}" + (
-                ", beyond the interval: quote it from a higher --fidelity" if "caveat" in e
+                f" *: beyond the interval's x/{e['interval_factor']:.2f}" if "caveat" in e
                 else "")
             lines.append(f"| {name} | {n} | {e['best']:.2e} | {lo:.2e} - {hi:.2e} | "
                          f"{e['flag']} | {effect} |")
     lines += ["", f"Quote **{head['quote']}**: {head['why']}. These values hold at fidelity "
               f"`{head['fidelity']}` ({head['holds_at']}); the error budget below gives what "
-              "the RVE leaves out. Flags: determined; bounded on one side (the interval "
-              "reaches one end of the prior); undetermined (both ends, or wider than "
-              f"{UNDETERMINED_DECADES:g} decades); at the prior's edge (the best value is); "
-              "voxel-specific (a per-area contact value, a property of the voxel)."]
+              "the RVE leaves out. " + _legend(head)]
     return lines

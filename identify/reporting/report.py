@@ -14,7 +14,7 @@ from itr_fv.rve_spec import SEED_STRIDE
 from ..inference.measurements import Measurements
 from ..inference.pipeline import Identification
 from .error_budget import error_budget, error_budget_lines
-from .headline import prior_ends
+from .headline import BIC_MARGIN, parametrisation_choice, prior_ends
 
 __all__ = ["identified_dict", "selection", "table3_lines", "table5_lines", "fidelity_statement",
            "table6_lines",
@@ -22,9 +22,6 @@ __all__ = ["identified_dict", "selection", "table3_lines", "table5_lines", "fide
            "difference_lines", "residual_lines", "box_cut",
            "BIC_MARGIN"]
 
-#: BIC difference from which one parametrisation is called better supported (Kass and
-#: Raftery's "positive evidence").
-BIC_MARGIN = 2.0
 
 
 def _paper_value(name: str) -> float | None:
@@ -62,15 +59,10 @@ def identified_dict(ident: Identification) -> dict:
 
 
 def selection(idents: Mapping[str, Identification]) -> dict:
-    """Which parametrisation the data support: the lower BIC, when lower by
-    :data:`BIC_MARGIN` or more; otherwise none."""
-    bics = {p: i.bic() for p, i in idents.items()}
-    order = sorted(bics, key=bics.get)
-    if len(order) < 2:
-        return {"bic": bics, "supported": None, "margin": None}
-    margin = bics[order[1]] - bics[order[0]]
-    return {"bic": bics, "margin": margin,
-            "supported": order[0] if margin >= BIC_MARGIN else None}
+    """Which parametrisation the data support (the lower BIC, when lower by
+    :data:`BIC_MARGIN` or more; otherwise none) and which one the headline quotes and why:
+    :func:`~itr_identify.reporting.headline.parametrisation_choice`, the one rule of both."""
+    return parametrisation_choice(idents)
 
 
 def _e(x: float) -> str:
@@ -204,18 +196,13 @@ def lofo_lines(lofo: Mapping[str, list[dict]]) -> list[str]:
 
 
 def identifiability_lines(idents: Mapping[str, Identification]) -> list[str]:
+    """Per stage its identifiability statement: the parameters the data do not determine
+    (by :meth:`~itr_identify.inference.calibrate.Posterior.determination`, the rule of the
+    headline's flags) and the combinations they do not separate; then strong correlations."""
     lines = []
     for par, ident in idents.items():
         corr = ident.posterior.correlation()
         names = ident.posterior.names
-        prior = ident.posterior.prior
-        for n in names:
-            low_end, high_end = prior_ends(ident.posterior, n)
-            if low_end or high_end:
-                end = "upper" if high_end else "lower"
-                lines.append(f"- **{par}, {n}**: the 90 % interval reaches the prior's {end} "
-                             f"end ({prior[0]:g} - {prior[1]:g} m^2 K/W): the data bound it "
-                             "from one side only.")
         for st in ident.posterior.stages:
             ia = st.identifiability
             lines.append(f"- **{par}, {ia['system']}**: {ia['statement']}.")
@@ -230,35 +217,46 @@ def identifiability_lines(idents: Mapping[str, Identification]) -> list[str]:
 
 
 def selection_lines(idents: Mapping[str, Identification]) -> list[str]:
+    """The fit of each parametrisation, which one the data support and which one the
+    headline quotes, with the headline's own reason (:func:`selection`)."""
     sel = selection(idents)
     lines = ["| parametrisation | parameters | chi-square at best | chi-square / dof | BIC |",
              "|---|---|---|---|---|"]
     for p, ident in idents.items():
-        dof = max(len(ident.models) - ident.n_parameters, 1)
         lines.append(f"| {p} | {ident.n_parameters} | {ident.chi_square():.1f} | "
-                     f"{ident.chi_square() / dof:.2f} | {sel['bic'][p]:.1f} |")
+                     f"{sel['chi2_dof'][p]:.2f} | {sel['bic'][p]:.1f} |")
     lines.append("")
     if sel["margin"] is None:
-        lines.append("One parametrisation: no comparison (run both to compare them).")
+        text = "One parametrisation: no comparison (run both to compare them)."
     elif sel["supported"]:
-        lines.append(f"Criterion: the lower BIC by {BIC_MARGIN:g} or more. The data support "
-                     f"**{sel['supported']}** (BIC lower by {sel['margin']:.1f}).")
+        text = (f"Criterion: the lower BIC by {BIC_MARGIN:g} or more. The data support "
+                f"**{sel['supported']}** (BIC lower by {sel['margin']:.1f}).")
     else:
-        lines.append(f"Criterion: the lower BIC by {BIC_MARGIN:g} or more. Neither "
-                     f"parametrisation is supported over the other (BIC difference "
-                     f"{sel['margin']:.1f}).")
+        text = (f"Criterion: the lower BIC by {BIC_MARGIN:g} or more. Neither "
+                f"parametrisation is supported over the other (BIC difference "
+                f"{sel['margin']:.1f}).")
+    if sel["agrees"] and sel["supported"]:
+        text += f" The headline quotes it: {sel['why']}."
+    elif sel["agrees"]:
+        text += f" The headline quotes **{sel['quote']}**: {sel['why']}."
+    else:
+        text += (f" The headline nevertheless quotes **{sel['quote']}**, deliberately: "
+                 f"{sel['why']}.")
+    lines.append(text)
     return lines
 
 
 def box_cut(settings, fillers=None) -> dict[str, float]:
-    """Volume fraction of each filler's Table 1 distribution above the largest diameter
-    (``fillers``: those to give, default all of Table 1)."""
-    from itr_fv.psd import LogNormalPSD
+    """Volume fraction of each filler's Table 1 distribution above the largest diameter its
+    RVEs draw (``fillers``: those to give, default all of Table 1): the cut of
+    :func:`itr_fv.rve.size_cut`, the one that packs them."""
+    from itr_fv.rve import FillerSpec, size_cut
 
-    d_max = settings.max_diameter_box_ratio * settings.box_um
-    return {f: LogNormalPSD(p.mu, p.sigma, settings.psd_basis).to_number()
-            .mass_outside(0.0, d_max, k=3.0)[1] for f, p in paper_data.TABLE1.items()
-            if fillers is None or f in fillers}
+    rve = settings.rve
+    return {f: size_cut(FillerSpec.from_table1(f, 0.5, basis=settings.psd_basis), rve.box_um,
+                        rve.voxel_um, tail_quantile=rve.tail_quantile,
+                        max_diameter_box_ratio=rve.max_diameter_box_ratio).volume_high
+            for f in paper_data.TABLE1 if fillers is None or f in fillers}
 
 
 def fillers_of(ident: Identification) -> set[str]:
