@@ -396,13 +396,14 @@ def plot_histogram_fit(fit: HistogramFit, path: str, title: str | None = None,
     ax.bar(e[:-1], fit.percent, width=np.diff(e), align="edge", color="0.75",
            edgecolor="0.4", linewidth=0.5, label=f"histogram ({fit.basis})")
     ax.plot(np.sqrt(e[:-1] * e[1:]), fit.predicted_percent(), "r-", lw=1.6,
-            label=(f"lognormal fit: mu={fit.psd.mu:.3f}, sigma={fit.psd.sigma:.3f}\n"
-                   f"(number: mu={fit.number.mu:.3f}); R^2={fit.r2:.4f}"))
+            label=(f"lognormal fit: $\\mu$ = {fit.psd.mu:.3f}, $\\sigma$ = "
+                   f"{fit.psd.sigma:.3f}\n(number: $\\mu$ = {fit.number.mu:.3f}); "
+                   f"$R^2$ = {fit.r2:.4f}"))
     if sample_um is not None and len(sample_um):
         hs = histogram_from_sample(sample_um, e, fit.basis) * fit.percent.sum() / 100.0
         ax.plot(np.sqrt(e[:-1] * e[1:]), hs, "bo", ms=3, label="generated particles")
     ax.set_xscale("log")
-    ax.set_xlabel("particle diameter D (um)")
+    ax.set_xlabel("particle diameter D (µm)")
     ax.set_ylabel(f"{fit.basis} density (% per bin)")
     if title:
         ax.set_title(title)

@@ -24,7 +24,8 @@ Diameters are drawn from the lognormal truncated to ``[d_lo, d_hi]`` per filler:
   a filler's volume or 5 % of its particles, the voxel is too coarse: ``ValueError``.
 
 The cuts and the shares (number and volume) of the untruncated distribution they remove
-are reported per filler.
+are reported per filler; :func:`size_cut` computes them for one filler without packing
+(the figures and reports quote its shares).
 
 Packing limit
 -------------
@@ -61,7 +62,7 @@ from .psd import (
 from .rve_spec import RVESpec, voxels_per_edge
 
 __all__ = ["FillerSpec", "FillerReport", "RVEReport", "generate_rve", "packing_limit",
-           "build_rve", "PackedRVE"]
+           "build_rve", "PackedRVE", "SizeCut", "size_cut"]
 
 
 @dataclass(frozen=True)
@@ -335,6 +336,77 @@ def _draw_to_volume(psd: LogNormalPSD, target_um3: float, lo: float, hi: float,
     return d * (target_um3 / vol) ** (1.0 / 3.0)
 
 
+def _cut_arguments(tail_quantile: float, min_diameter_voxels: float,
+                   max_diameter_box_ratio: float) -> tuple[float, float, float]:
+    """The size-cut arguments of :func:`generate_rve`, checked (ValueError naming one)."""
+    tq = _num(tail_quantile, "tail_quantile")
+    if not 0.0 < tq < 0.05:
+        raise ValueError(f"tail_quantile must lie in (0, 0.05), got {tail_quantile!r}")
+    mdv = _num(min_diameter_voxels, "min_diameter_voxels")
+    if mdv < 0:
+        raise ValueError(f"min_diameter_voxels must be >= 0, got {min_diameter_voxels!r}")
+    ratio = _num(max_diameter_box_ratio, "max_diameter_box_ratio")
+    if not 0.0 < ratio < 0.5:
+        raise ValueError(f"max_diameter_box_ratio must lie in (0, 0.5), got {ratio!r}")
+    return tq, mdv, ratio
+
+
+class SizeCut(NamedTuple):
+    """The diameters one filler's RVE draws (:func:`size_cut`), um, and the shares of its
+    untruncated number-weighted lognormal that the two cuts remove (fractions, 0-1)."""
+
+    d_lo_um: float
+    d_hi_um: float
+    number_low: float
+    number_high: float
+    volume_low: float
+    volume_high: float
+    #: Whether ``d_hi_um`` is the box's limit ``max_diameter_box_ratio * box_um`` (the box
+    #: cut) rather than the far tail or the spec's ``d_max_um``.
+    box_limited: bool
+
+
+def size_cut(spec: FillerSpec, box_um: float, voxel_um: float, *,
+             tail_quantile: float = 1e-4, min_diameter_voxels: float = 2.0,
+             max_diameter_box_ratio: float = 1.0 / 3.0) -> SizeCut:
+    """The size truncation :func:`generate_rve` applies to one filler (module notes, "Size
+    truncation"): the range ``[d_lo, d_hi]`` of the drawn diameters and the number and
+    volume shares of the lognormal below and above it.
+
+    Raises
+    ------
+    ValueError
+        Bad cut arguments, an explicit ``d_max_um`` above ``max_diameter_box_ratio`` of the
+        box, or a voxel too coarse for the small particles of the filler.
+    """
+    tq, mdv, ratio = _cut_arguments(tail_quantile, min_diameter_voxels, max_diameter_box_ratio)
+    L, h = float(box_um), float(voxel_um)
+    s, psd = spec, spec.psd
+    if s.d_max_um is not None and s.d_max_um > ratio * L * (1 + 1e-12):
+        raise ValueError(f"box_um: a box of {L:g} um is too small for particles up to "
+                         f"d_max_um = {s.d_max_um:g} um of {s.material} (the box must be at "
+                         f"least {1 / ratio:.3g} x d_max)")
+    hi = min(float(psd.ppf(1.0 - tq)), ratio * L,
+             s.d_max_um if s.d_max_um is not None else math.inf)
+    lo_vox = mdv * h
+    lo = max(float(psd.ppf(tq)), lo_vox, s.d_min_um if s.d_min_um is not None else 0.0)
+    if lo >= hi:
+        raise ValueError(f"voxel_um: with {mdv:g}-voxel minimum diameter ({lo_vox:g} um) "
+                         f"nothing of {s.material} remains below d_hi = {hi:.3g} um")
+    n_lo_vox, _ = psd.mass_outside(lo_vox, math.inf, 0.0)
+    v_lo_vox, _ = psd.mass_outside(lo_vox, math.inf, 3.0)
+    if v_lo_vox > 0.01 or n_lo_vox > 0.05:
+        raise ValueError(
+            f"voxel_um: {h:g} um voxels cannot resolve the small particles of {s.material} "
+            f"that matter: diameters below {mdv:g} voxels = {lo_vox:g} um hold "
+            f"{v_lo_vox:.1%} of its volume and {n_lo_vox:.1%} of its particles "
+            f"(limits 1 % and 5 %); use a smaller voxel")
+    nl, nh = psd.mass_outside(lo, hi, 0.0)
+    vl, vh = psd.mass_outside(lo, hi, 3.0)
+    box_limited = hi <= ratio * L * (1 + 1e-12) and abs(hi - ratio * L) < 1e-9 * L
+    return SizeCut(lo, hi, nl, nh, vl, vh, bool(box_limited))
+
+
 def _face_contacts(pid: np.ndarray) -> int:
     n = 0
     for ax in range(3):
@@ -436,15 +508,7 @@ def generate_rve(specs: Sequence[FillerSpec] | FillerSpec, box_um: float, voxel_
         raise ValueError(f"min_gap_um must be >= 0 um, got {min_gap_um!r}")
     if not isinstance(matrix, str) or not matrix:
         raise ValueError(f"matrix: expected a phase name, got {matrix!r}")
-    tq = _num(tail_quantile, "tail_quantile")
-    if not 0.0 < tq < 0.05:
-        raise ValueError(f"tail_quantile must lie in (0, 0.05), got {tail_quantile!r}")
-    mdv = _num(min_diameter_voxels, "min_diameter_voxels")
-    if mdv < 0:
-        raise ValueError(f"min_diameter_voxels must be >= 0, got {min_diameter_voxels!r}")
-    ratio = _num(max_diameter_box_ratio, "max_diameter_box_ratio")
-    if not 0.0 < ratio < 0.5:
-        raise ValueError(f"max_diameter_box_ratio must lie in (0, 0.5), got {ratio!r}")
+    _cut_arguments(tail_quantile, min_diameter_voxels, max_diameter_box_ratio)
     if sampling not in ("stratified", "iid"):
         raise ValueError(f"sampling: expected 'stratified' or 'iid', got {sampling!r}")
     cgap = 0.5 * h if contact_gap_um is None else _num(contact_gap_um, "contact_gap_um")
@@ -469,37 +533,20 @@ def generate_rve(specs: Sequence[FillerSpec] | FillerSpec, box_um: float, voxel_
     shares: list[tuple[float, float, float, float]] = []
     warn: list[str] = []
     for s in specs:
-        psd = s.psd
-        if s.d_max_um is not None and s.d_max_um > ratio * L * (1 + 1e-12):
-            raise ValueError(f"box_um: a box of {L:g} um is too small for particles up to "
-                             f"d_max_um = {s.d_max_um:g} um of {s.material} (the box must be at "
-                             f"least {1 / ratio:.3g} x d_max)")
-        hi = min(float(psd.ppf(1.0 - tq)), ratio * L,
-                 s.d_max_um if s.d_max_um is not None else math.inf)
-        lo_vox = mdv * h
-        lo = max(float(psd.ppf(tq)), lo_vox, s.d_min_um if s.d_min_um is not None else 0.0)
-        if lo >= hi:
-            raise ValueError(f"voxel_um: with {mdv:g}-voxel minimum diameter ({lo_vox:g} um) "
-                             f"nothing of {s.material} remains below d_hi = {hi:.3g} um")
-        n_lo_vox, _ = psd.mass_outside(lo_vox, math.inf, 0.0)
-        v_lo_vox, _ = psd.mass_outside(lo_vox, math.inf, 3.0)
-        if v_lo_vox > 0.01 or n_lo_vox > 0.05:
-            raise ValueError(
-                f"voxel_um: {h:g} um voxels cannot resolve the small particles of {s.material} "
-                f"that matter: diameters below {mdv:g} voxels = {lo_vox:g} um hold "
-                f"{v_lo_vox:.1%} of its volume and {n_lo_vox:.1%} of its particles "
-                f"(limits 1 % and 5 %); use a smaller voxel")
-        nl, nh = psd.mass_outside(lo, hi, 0.0)
-        vl, vh = psd.mass_outside(lo, hi, 3.0)
-        if hi <= ratio * L * (1 + 1e-12) and abs(hi - ratio * L) < 1e-9 * L and vh > 0.01:
-            msg = (f"{s.material}: the {L:g} um box limits diameters to {hi:.3g} um "
-                   f"(box/{1 / ratio:.3g}); the cut removes {vh:.1%} of the volume "
-                   f"({nh:.2%} of the particles) of the lognormal (mu={psd.mu}, "
-                   f"sigma={psd.sigma}) -- the RVE under-represents its coarse particles")
+        cut = size_cut(s, L, h, tail_quantile=tail_quantile,
+                       min_diameter_voxels=min_diameter_voxels,
+                       max_diameter_box_ratio=max_diameter_box_ratio)
+        if cut.box_limited and cut.volume_high > 0.01:
+            psd = s.psd
+            msg = (f"{s.material}: the {L:g} um box limits diameters to {cut.d_hi_um:.3g} um "
+                   f"(box/{1 / max_diameter_box_ratio:.3g}); the cut removes "
+                   f"{cut.volume_high:.1%} of the volume ({cut.number_high:.2%} of the "
+                   f"particles) of the lognormal (mu={psd.mu}, sigma={psd.sigma}) -- the RVE "
+                   "under-represents its coarse particles")
             warnings.warn(msg, UserWarning, stacklevel=2)
             warn.append(msg)
-        cuts.append((lo, hi))
-        shares.append((nl, nh, vl, vh))
+        cuts.append((cut.d_lo_um, cut.d_hi_um))
+        shares.append((cut.number_low, cut.number_high, cut.volume_low, cut.volume_high))
 
     phi_rcp, sig_mix = packing_limit(specs, cuts)
     if phi_total > phi_rcp:
