@@ -24,7 +24,7 @@ from collections.abc import Iterator, Mapping, Sequence
 from datetime import datetime, timezone
 from pathlib import Path
 
-__all__ = ["output_file", "atomic_path", "write_text", "sha256", "begin_run",
+__all__ = ["output_file", "atomic_path", "write_text", "sha256", "begin_run", "counted",
            "write_manifest", "read_manifest", "MANIFEST"]
 
 MANIFEST = "manifest.json"
@@ -171,3 +171,9 @@ def write_manifest(folder: str | os.PathLike, files: Sequence[str | os.PathLike]
         "files": entries,
     }
     return write_text(folder / MANIFEST, json.dumps(manifest, indent=2) + "\n")
+
+
+def counted(n: int, noun: str, plural: str | None = None) -> str:
+    """``n`` and ``noun`` in the number it takes: ``"1 worker"``, ``"3 workers"``, ``"0 workers"``
+    (``plural``: where adding "s" is wrong, e.g. ``"entries"``)."""
+    return f"{n} {noun if n == 1 else (plural or noun + 's')}"

@@ -45,6 +45,7 @@ BAD = [
     (["demo", "--out", "afile"], 2, "--out: 'afile' is a file"),
     (["demo", "--out", "afile/sub"], 2, "--out: 'afile' is a file"),
     (["demo", "--out", "/proc/itr-out"], 2, "--out: cannot write"),
+    (["demo", "--out", "notes"], 2, "--out: 'notes' is not empty (1 entry) and holds no earlier"),
     (["demo", "--voxel-um", "1.6", "--box-um", "16"], 2, "--voxel-um: 1.6 um voxels cannot"),
 ]
 
@@ -52,6 +53,8 @@ BAD = [
 @pytest.mark.parametrize("args,status,text", BAD, ids=[" ".join(a) or "no-args" for a, _, _ in BAD])
 def test_bad_invocations_are_one_line_with_status_and_leave_nothing(args, status, text, tmp_path):
     (tmp_path / "afile").write_text("not a folder")
+    (tmp_path / "notes").mkdir()
+    (tmp_path / "notes" / "lab-book.txt").write_text("someone's files, not a run's")
     before = sorted(p.name for p in tmp_path.iterdir())
     r = run_itr(*args, cwd=tmp_path)
     assert r.returncode == status, r.stderr
@@ -126,6 +129,7 @@ def test_demo_end_to_end_small(tmp_path):
     assert r2.returncode == 0, r2.stderr
     again = json.loads((out / "manifest.json").read_text())
     assert again["inputs"]["seed"] == 2 and (out / "stale-note.txt").exists()
+    assert "--out: 'd' holds an earlier run's output: its files are replaced" in r2.stderr
 
 
 def test_sigterm_mid_run_leaves_no_output_folder(tmp_path):

@@ -18,6 +18,7 @@ import argparse
 import contextlib
 import math
 import shutil
+import sys
 import tempfile
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -97,6 +98,8 @@ def output_folder(path: str) -> Iterator[Path]:
                 raise CLIError(f"--out: {str(parent)!r} is a file, not a folder", 2)
             break
     created = not out.exists()
+    if not created:
+        _check_reused(out, path)
     try:
         out.mkdir(parents=True, exist_ok=True)
         with tempfile.TemporaryFile(dir=out):
@@ -114,6 +117,29 @@ def output_folder(path: str) -> Iterator[Path]:
         if created and not (out / "solves").is_dir():
             shutil.rmtree(out, ignore_errors=True)
         raise
+
+
+def _check_reused(out: Path, path: str) -> None:
+    """Accept an existing ``--out`` folder only if it is empty or an earlier ``itr`` run's.
+
+    An earlier run's folder (it has ``manifest.json`` or ``solves/``) is reused: its listed
+    files are replaced and its finished solves kept, which is how a killed run resumes. Any
+    other non-empty folder is refused, so that no one's files get mixed with a run's.
+    """
+    from itr_fv.io import MANIFEST, counted
+
+    entries = [p for p in out.iterdir() if not p.name.startswith(".")]
+    if not entries:
+        return
+    if (out / MANIFEST).is_file() or (out / "solves").is_dir():
+        solves = out / "solves"
+        kept = sum(1 for _ in solves.rglob("*.parquet")) if solves.is_dir() else 0
+        print(f"--out: {path!r} holds an earlier run's output: its files are replaced, "
+              f"{counted(kept, 'finished solve')} kept", file=sys.stderr)
+        return
+    raise CLIError(f"--out: {path!r} is not empty ({counted(len(entries), 'entry', 'entries')}) "
+                   "and holds no earlier "
+                   "itr output; name a new or empty folder", 2)
 
 
 # ------------------------------------------------------------------- shared by several commands

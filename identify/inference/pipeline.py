@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from itr_fv.io import counted
 from itr_surrogate.engine import SolveEngine
 
 from ..forward.model import PARAMETRISATIONS, ForwardModel, ForwardSettings
@@ -147,8 +148,8 @@ def identify(measurements: Measurements, parametrisation: str = "gap", *,
     seconds = {"single-filler models": time.perf_counter() - t0}
     t = time.perf_counter()
     if singles:
-        echo(f"  {par.name}: calibration of {len(singles)} single-filler formulations, "
-             "replicas solved at the best point")
+        echo(f"  {par.name}: calibration of {counted(len(singles), 'single-filler formulation')}"
+             ", replicas solved at the best point")
     post = _anchored(models, singles, measurements, grid_points, seed) if singles else None
     seconds["single-filler calibration and anchors"] = time.perf_counter() - t
     if post is not None and faithful is not None:

@@ -29,6 +29,8 @@ from importlib import resources
 
 import numpy as np
 
+from itr_fv.io import counted
+
 from ..forward.fidelity import fidelity_name
 from ..inference.calibrate import pooled_scatter, stages_of
 from ..inference.pipeline import Identification
@@ -231,7 +233,7 @@ def error_budget_lines(ident: Identification, budget: dict | None = None) -> lis
     lines += ["", f"Largest effects on the resistances: {', '.join(b['dominant'])}. The "
               f"numerical error (RVE scatter, surrogate, correction, uncorrected voxel bias, "
               f"box beyond the box solved, in quadrature) is below the measurement noise in "
-              f"{n_below} of {len(forms)} formulations."]
+              f"{n_below} of {counted(len(forms), 'formulation')}."]
     first_of = {}
     for f, d in forms.items():
         first_of.setdefault(d["system"], f)

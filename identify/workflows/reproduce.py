@@ -20,7 +20,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
-from itr_fv.io import atomic_path, begin_run, write_manifest, write_text
+from itr_fv.io import atomic_path, begin_run, counted, write_manifest, write_text
 from itr_fv.rve_spec import RVESpec
 from itr_surrogate.engine import SolveEngine
 
@@ -129,8 +129,8 @@ def _identify_all(meas: Measurements, settings: ReproduceSettings, progress: boo
                   echo: Callable[[str], None], engine: SolveEngine) -> dict[str, Identification]:
     idents = {}
     for par in settings.parametrisations:
-        echo(f"{par}: RVEs, reduced bases and RVE scatter of {len(meas.formulations)} "
-             "formulations")
+        echo(f"{par}: RVEs, reduced bases and RVE scatter of "
+             f"{counted(len(meas.formulations), 'formulation')}")
         idents[par] = identify(meas, par, settings=settings.forward,
                                grid_points=settings.grid_points, seed=settings.seed,
                                progress=False, echo=echo, engine=engine)
@@ -318,7 +318,22 @@ def _identify_report(meas: Measurements, settings: ReproduceSettings, out: Path,
                                              **settings.to_dict()}))
     for line in headline_lines(head):
         echo(line)
-    echo(f"identify: done in {time.perf_counter() - t0:.0f} s; wrote {out / 'identified.json'}")
+    echo(f"identify: done in {time.perf_counter() - t0:.0f} s; wrote {_written(out, files)}")
     return files
+
+
+def _written(out: Path, files: list[Path]) -> str:
+    """The files of a run as its last line names them: the folder, the report first, the
+    figures together ("itr-identify/: report.md, identified.json, figures posterior_area.png
+    and posterior_gap.png, manifest.json")."""
+    names = [Path(f).name for f in files]
+    figs = [n for n in names if n.endswith(".png")]
+    parts = [n for n in ("report.md",) if n in names]
+    parts += [n for n in names if n not in figs and n not in ("report.md", "manifest.json")]
+    if figs:
+        parts.append(f"figure {figs[0]}" if len(figs) == 1 else
+                     f"figures {', '.join(figs[:-1])} and {figs[-1]}")
+    parts += [n for n in ("manifest.json",) if n in names]
+    return f"{out}{'' if str(out).endswith('/') else '/'}: " + ", ".join(parts)
 
 
