@@ -35,6 +35,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import logging
 import math
 import os
 import threading
@@ -451,7 +452,6 @@ def open_client(workers: int | None, scheduler: str | None, *, memory_per_worker
     from itr_fv.resources import available_memory
 
     gpu = needs_gpu(solver)
-    extra: dict[str, Any] = {}
     if gpu:
         devices = cuda_device_count()
         if devices < 1:
@@ -459,7 +459,6 @@ def open_client(workers: int | None, scheduler: str | None, *, memory_per_worker
                                                   "local cluster (neither CuPy nor PyTorch "
                                                   "finds one)"))
         n = min(workers or devices, devices)
-        extra["resources"] = {"GPU": 1}
     else:
         n = workers or max(1, min(os.cpu_count() or 1, 4))
     avail = available_memory() or memory_per_worker
@@ -468,13 +467,31 @@ def open_client(workers: int | None, scheduler: str | None, *, memory_per_worker
         echo(f"memory: {n} workers of {memory_per_worker / 1e9:.2f} GB do not fit in "
              f"{avail / 1e9:.1f} GB; using {fit}")
         n = fit
-    cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
-                           memory_limit=memory_per_worker, dashboard_address=None, **extra)
+    if gpu:
+        cluster = _gpu_cluster(n, memory_per_worker)
+    else:
+        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
+                               memory_limit=memory_per_worker, dashboard_address=None)
     try:
         return Client(cluster), cluster
     except BaseException:
         cluster.close()
         raise
+
+
+def _gpu_cluster(n: int, memory_per_worker: int):
+    """A local cluster of ``n`` worker processes, worker i seeing only the i-th CUDA device
+    (``CUDA_VISIBLE_DEVICES``, within any the command itself was limited to) and declaring
+    the resource ``GPU=1``: one solve per device at a time, every device used."""
+    from dask.distributed import Nanny, Scheduler, SpecCluster
+
+    visible = [d.strip() for d in os.environ.get("CUDA_VISIBLE_DEVICES", "").split(",")
+               if d.strip()] or [str(i) for i in range(n)]
+    workers = {f"gpu-{i}": {"cls": Nanny, "options": {
+        "nthreads": 1, "memory_limit": memory_per_worker, "resources": {"GPU": 1},
+        "env": {"CUDA_VISIBLE_DEVICES": visible[i]}}} for i in range(n)}
+    return SpecCluster(workers=workers, silence_logs=logging.ERROR,
+                       scheduler={"cls": Scheduler, "options": {"dashboard_address": None}})
 
 
 def ready_workers(client, scheduler: str | None, solver: str | None = None, *,

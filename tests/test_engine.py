@@ -3,6 +3,8 @@ finished solve (a re-run solves nothing), and the geometry is built once per RVE
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pytest
 
@@ -188,17 +190,20 @@ def test_a_local_cluster_for_gpu_solves_is_refused_where_there_is_no_gpu(rves, t
 
 
 def test_a_local_cluster_for_gpu_solves_declares_one_gpu_worker_per_device(monkeypatch):
-    """With one CUDA device (the count faked: CI has none), the LocalCluster for solver
-    "gpu" has one worker, however many were asked for, and it declares GPU=1; a CPU
-    solver's cluster declares none."""
-    monkeypatch.setattr(eng, "cuda_device_count", lambda: 1)
+    """With two CUDA devices (the count faked: CI has none), the local cluster for solver
+    "gpu" has two workers, however many were asked for, each declaring GPU=1 and seeing its
+    own device only; a CPU solver's cluster declares none."""
+    monkeypatch.setattr(eng, "cuda_device_count", lambda: 2)
+    monkeypatch.delenv("CUDA_VISIBLE_DEVICES", raising=False)
     client, cluster = eng.open_client(3, None, memory_per_worker=10**9, solver="gpu",
                                       echo=lambda s: None)
     try:
         workers = client.scheduler_info()["workers"]
-        assert [w["resources"] for w in workers.values()] == [{"GPU": 1}]
-        assert eng.ready_workers(client, None, "gpu") == 1
-        assert eng.ready_workers(client, None, "fft") == 1
+        assert [w["resources"] for w in workers.values()] == [{"GPU": 1}, {"GPU": 1}]
+        seen = client.run(lambda: os.environ.get("CUDA_VISIBLE_DEVICES"))
+        assert sorted(seen.values()) == ["0", "1"]
+        assert eng.ready_workers(client, None, "gpu") == 2
+        assert eng.ready_workers(client, None, "fft") == 2
     finally:
         client.close()
         cluster.close()
