@@ -51,7 +51,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from itr_fv.io import atomic_path
+from itr_fv.io import atomic_path, counted
 from itr_fv.materials import Materials
 from itr_fv.microstructure import Microstructure
 from itr_fv.problem import DiscreteProblem
@@ -517,8 +517,9 @@ def ready_workers(client, scheduler: str | None, solver: str | None = None, *,
         workers = client.scheduler_info().get("workers", {})
     if needs_gpu(solver) and not any((w.get("resources") or {}).get("GPU", 0) >= 1
                                      for w in workers.values()):
-        why = (f"none of the {len(workers)} workers of --scheduler {scheduler!r} declares "
-               "the resource GPU" if scheduler else "the local cluster has no GPU worker")
+        why = (f"no worker of --scheduler {scheduler!r} ({counted(len(workers), 'worker')} "
+               "connected) declares the resource GPU" if scheduler
+               else "the local cluster has no GPU worker")
         raise ValueError(_gpu_refusal(solver, why, scheduler))
     return len(workers)
 

@@ -140,9 +140,9 @@ def test_gpu_solves_go_only_to_workers_that_declare_a_gpu(rves):
                       dashboard_address=None) as plain:
         # the engine refuses at once, before submitting anything (never a silent wait)
         with SolveEngine(scheduler=plain.scheduler_address, echo=lambda s: None) as engine:
-            with pytest.raises(ValueError, match=r"none of the 1 workers .* declares the "
-                               r"resource GPU; start GPU workers with 'dask worker .* "
-                               r"--resources GPU=1'"):
+            with pytest.raises(ValueError, match=r"no worker of --scheduler .* \(1 worker "
+                               r"connected\) declares the resource GPU; start GPU workers "
+                               r"with 'dask worker .* --resources GPU=1'"):
                 engine.solve([req])
             assert engine.solved == 0 and not plain.scheduler.tasks
     with LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
