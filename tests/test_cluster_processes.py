@@ -149,7 +149,7 @@ def test_a_campaign_on_workers_in_another_directory_writes_into_the_clients_fold
     code, out, err = itr_main(capsys, "campaign", "run", str(TINY), "--out", "tiny",
                               "--scheduler", address, "--no-progress")
     assert code == 0, err
-    assert "4 tasks (12 solves)" in out and "on 1 workers; 0 failed" in out
+    assert "4 tasks (12 solves)" in out and "on 1 worker; 0 failed" in out
     # the parts are in the client's folder, and nothing at all in the worker's
     parts = sorted(p.stem for p in (tmp_path / "tiny" / "parts").glob("*.parquet"))
     assert parts == sorted(t.task_id for t in camp.tasks()) and len(parts) == 4
