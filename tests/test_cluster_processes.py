@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -185,6 +186,37 @@ def test_a_campaign_on_workers_in_another_directory_writes_into_the_clients_fold
     code, out, _ = itr_main(capsys, "campaign", "run", str(TINY), "--out", "tiny",
                             "--scheduler", address, "--no-progress")
     assert code == 0 and "all 4 tasks are done; nothing to solve" in out
+
+
+def test_itr_identify_on_workers_in_another_directory_keeps_every_solve_on_the_client(
+        cluster, tmp_path, monkeypatch, capsys):
+    """``itr identify --scheduler`` with a relative ``--out``: every full solve the engine
+    reports is a row in the client's ``out/solves``, the worker's folder stays empty, and a
+    second run into the same folder solves nothing (it reads the client's store)."""
+    address, worker_cwd = cluster
+    monkeypatch.chdir(tmp_path)
+    Path("m.csv").write_text("formulation,replicate,k_W_per_mK\n"
+                             "Al2O3-55,1,1.29\nAl2O3-55,2,1.30\nAl2O3-55,3,1.22\n"
+                             "Al2O3-62,1,1.70\nAl2O3-62,2,1.75\nAl2O3-62,3,1.66\n")
+    args = ["identify", "m.csv", "--out", "out", "--parametrisation", "gap", "--box-um", "12",
+            "--voxel-um", "0.5", "--replicas", "2", "--no-progress", "--fidelity", "quick",
+            "--scheduler", address]
+    code, out, err = itr_main(capsys, *args)
+    assert code == 0, err
+    solved = re.search(r"engine: (\d+) full solves on scheduler .*, (\d+) reused", out)
+    assert solved and int(solved.group(1)) > 0, out  # (a run reuses its own repeats)
+    rows = sorted(Path("out", "solves").rglob("*.parquet"))
+    assert len(rows) == int(solved.group(1))
+    first = json.loads(Path("out", "identified.json").read_text())
+    r = first["gap"]["parameters"]["R_Al2O3_silicone"]
+    assert 1e-9 <= r["interval_90"][0] <= r["best"] <= r["interval_90"][1] <= 1e-5
+    assert _files(worker_cwd) == []
+    code, out, err = itr_main(capsys, *args)
+    assert code == 0, err
+    again = re.search(r"engine: (\d+) full solves on scheduler .*, (\d+) reused", out)
+    assert again and int(again.group(1)) == 0 and int(again.group(2)) >= len(rows), out
+    second = json.loads(Path("out", "identified.json").read_text())
+    assert second["gap"]["parameters"]["R_Al2O3_silicone"]["best"] == r["best"]
 
 
 def test_the_solve_engine_on_an_external_cluster_keeps_its_store_on_the_client(
