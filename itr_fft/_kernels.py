@@ -268,11 +268,6 @@ def log_sum_positive(g):  # pragma: no cover - compiled
     return part[:, 0].sum(), int(part[:, 1].sum())
 
 
-def laplacian_symbol(n: int) -> np.ndarray:
-    """``4 sin^2(pi xi / n)`` for xi = 0..n-1 (float64)."""
-    return 4.0 * np.sin(np.pi * np.arange(n) / n) ** 2
-
-
 @njit(**_SER)
 def _row_residual(g0, g1, g2, gd, x, d, hE, i, im, ip):  # pragma: no cover - compiled
     n2, n3 = x.shape[1], x.shape[2]

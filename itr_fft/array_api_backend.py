@@ -30,6 +30,7 @@ from itr_fv.krylov import ArrayOps, conjugate_gradients
 from itr_fv.problem import DiscreteSystem
 
 from .numba_backend import check_float32_tol, float_dtype, reference_conductance
+from .spectral import inverse_laplacian
 
 __all__ = ["ArrayAPIBackend", "ArrayAPIOps", "NAMESPACES", "DEVICES", "resolve_device"]
 
@@ -223,10 +224,7 @@ class _FFTPreconditioner:
 
     def __init__(self, xp: Any, device: Any, shape: tuple[int, int, int], g_ref: float,
                  dtype: Any, clusters: _Clusters | None) -> None:
-        s = [4.0 * np.sin(np.pi * np.arange(n) / n) ** 2 for n in shape]
-        lam = s[0][:, None, None] + s[1][None, :, None] + s[2][None, None, :shape[2] // 2 + 1]
-        with np.errstate(divide="ignore"):
-            inverse = np.where(lam > 0, 1.0 / (g_ref * lam), 0.0)
+        inverse = inverse_laplacian(shape, g_ref)
         self.xp = xp
         self.shape = shape
         self.inverse = xp.asarray(inverse, dtype=dtype, device=device)

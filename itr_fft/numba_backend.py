@@ -44,6 +44,7 @@ from . import _kernels as K
 from . import _mg_kernels as MG
 from .deflation import ParticleDeflation
 from .multigrid import MG_BYTES_PER_VOXEL, AggregationMultigrid
+from .spectral import laplacian_symbol
 
 __all__ = ["NumbaFFTBackend", "reference_conductance", "FLOAT32_MIN_TOL", "float32_min_tol",
            "choose_preconditioner", "AUTO_CONTRAST", "PRECONDITIONERS",
@@ -152,7 +153,7 @@ class _Preconditioner:
                  fft_dtype: np.dtype) -> None:
         self.shape = shape
         self.fft_dtype = fft_dtype
-        self.s = [K.laplacian_symbol(n) for n in shape]
+        self.s = [laplacian_symbol(n) for n in shape]
         self.inv_gref = 1.0 / g_ref
         self.workers = workers
         self.labels_flat = labels_flat

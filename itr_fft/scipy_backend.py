@@ -25,12 +25,9 @@ from itr_fv.krylov import conjugate_gradients
 from itr_fv.model import apply_operator
 from itr_fv.problem import DiscreteSystem
 
+from .spectral import inverse_laplacian
+
 __all__ = ["ScipyFFTBackend"]
-
-
-def _symbol(n: int) -> np.ndarray:
-    """4 sin^2(pi xi / n): the periodic 1-D second-difference symbol."""
-    return 4.0 * np.sin(np.pi * np.arange(n) / n) ** 2
 
 
 class _Operator:
@@ -48,11 +45,7 @@ class _Preconditioner:
         shape = g.shape[1:]
         positive = g[g > 0]
         g_ref = float(np.exp(np.mean(np.log(positive)))) if positive.size else 1.0
-        s = [_symbol(n) for n in shape]
-        lam = (s[0][:, None, None] + s[1][None, :, None]
-               + s[2][None, None, : shape[2] // 2 + 1])
-        with np.errstate(divide="ignore"):
-            self.inverse = np.where(lam > 0, 1.0 / (g_ref * lam), 0.0)
+        self.inverse = inverse_laplacian(shape, g_ref)
         self.shape = shape
         self.g_ref = g_ref
         self.labels = labels
