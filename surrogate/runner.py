@@ -218,7 +218,7 @@ def run_campaign(campaign: Campaign, folder: str | Path, *, workers: int | None 
             cluster.close()
     missing = sorted(t for t in written if not store.part_path(t).is_file())
     if missing:
-        raise CampaignError(f"{len(missing)} tasks reported done have no part file in "
+        raise CampaignError(f"{counted(len(missing), 'task')} reported done without a part file in "
                             f"{str(store.folder / 'parts')!r}: {', '.join(missing)}")
     summary = RunSummary(len(todo) - failed, len(tasks) - len(todo), failed, solves,
                          time.perf_counter() - t0, n_workers)
