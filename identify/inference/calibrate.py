@@ -256,7 +256,7 @@ class Posterior:
         if best <= p_lo * EDGE_FACTOR or best >= p_hi / EDGE_FACTOR:
             return DETERMINATIONS[0]
         lo, hi = self.interval(name)
-        low_end, high_end = self.prior_ends(name)
+        low_end, high_end = _reach(lo, hi, self.prior)
         if (low_end and high_end) or math.log10(hi / lo) > UNDETERMINED_DECADES:
             return DETERMINATIONS[1]
         if low_end or high_end:
