@@ -1,11 +1,11 @@
-"""itr_fft: FFT-preconditioned CG backends of the discrete model of :mod:`itr_fv.model`.
+"""itr_fft: FFT-preconditioned CG backends of the discrete model of :mod:`itr_fv.discrete.model`.
 
 Public API::
 
     import itr_fft
     res = itr_fft.homogenize(ms, mat, tol=1e-8)       # same signature/result as itr_fv
 
-Importing the package registers three backends of :func:`itr_fv.solve.homogenize`:
+Importing the package registers three backends of :func:`itr_fv.solvers.driver.homogenize`:
 ``"itr_fft"`` (:mod:`itr_fft.numba_backend`, fused numba kernels, the fast one on a CPU;
 its preconditioner is the FFT Laplacian inverse or, with ``preconditioner="multigrid"``,
 particle deflation around an aggregation multigrid, :mod:`itr_fft.multigrid`,

@@ -14,7 +14,8 @@ accumulated two reductions in the loop body (``RecursionError`` on Python 3.12 w
 0.68, Python 3.11 compiled it); with no reduction variable in any ``prange`` body there is
 nothing for that analysis to do.
 
-Layout convention (as in :mod:`itr_fv.model`): ``g[d][i, j, k]`` is the conductance per unit
+Layout convention (as in :mod:`itr_fv.discrete.model`): ``g[d][i, j, k]`` is the conductance per
+unit
 area (W/(m^2 K)) of the face between voxel (i, j, k) and its periodic neighbour + e_d, so
 
     (A theta)_p = sum_d g_d[p] (theta_p - theta_{p+e_d}) + g_d[p-e_d] (theta_p - theta_{p-e_d})

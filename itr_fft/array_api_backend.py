@@ -1,11 +1,11 @@
 """The backend ``"array_api"``: the FFT-preconditioned CG written once against the array API.
 
-The operator (the 7-point face-conductance stencil of :mod:`itr_fv.model`), the
+The operator (the 7-point face-conductance stencil of :mod:`itr_fv.discrete.model`), the
 preconditioner (the exact inverse of the constant-coefficient periodic Laplacian with face
 conductance ``g_ref``, applied with real FFTs) and the cluster projection use only functions
 of the Python array API standard (``roll``, ``fft.rfftn``/``irfftn``, ``take``,
 ``cumulative_sum``, arithmetic, in-place updates), and CG is
-:func:`itr_fv.krylov.conjugate_gradients` with :class:`ArrayAPIOps`. So NumPy, CuPy and
+:func:`itr_fv.solvers.krylov.conjugate_gradients` with :class:`ArrayAPIOps`. So NumPy, CuPy and
 PyTorch arrays run the same lines, on the CPU or a GPU; ``array-api-strict`` (the
 standard's reference implementation) runs them in the tests, which proves nothing outside
 the standard is used.
@@ -25,9 +25,9 @@ from typing import Any
 
 import numpy as np
 
-from itr_fv.backends import Backend, LoadCaseSolution, PreparedSystem, register_backend
-from itr_fv.krylov import ArrayOps, conjugate_gradients
-from itr_fv.problem import DiscreteSystem
+from itr_fv.discrete.problem import DiscreteSystem
+from itr_fv.solvers.backends import Backend, LoadCaseSolution, PreparedSystem, register_backend
+from itr_fv.solvers.krylov import ArrayOps, conjugate_gradients
 
 from .numba_backend import check_float32_tol, float_dtype, reference_conductance
 from .spectral import inverse_laplacian

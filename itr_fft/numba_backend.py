@@ -1,8 +1,9 @@
-"""The backend ``"itr_fft"``: FFT-preconditioned CG on the discrete model of :mod:`itr_fv.model`
-with fused numba kernels (the CG itself is :func:`itr_fv.krylov.conjugate_gradients`).
+"""The backend ``"itr_fft"``: FFT-preconditioned CG on the discrete model of
+:mod:`itr_fv.discrete.model`
+with fused numba kernels (the CG itself is :func:`itr_fv.solvers.krylov.conjugate_gradients`).
 
 The operator is exactly the one ``itr_fv`` assembles (same face conductances, imported from
-``itr_fv.model``), applied matrix-free by a fused numba stencil kernel. The preconditioner
+``itr_fv.discrete.model``), applied matrix-free by a fused numba stencil kernel. The preconditioner
 is the exact inverse of the constant-coefficient periodic 7-point operator with face
 conductance ``g_ref`` (W/(m^2 K)), i.e. of ``k_ref / h^2 * sum_d 4 sin^2(pi xi_d / n_d)``
 times the voxel volume per face area h with ``k_ref = g_ref h``, zero mode removed, applied
@@ -36,9 +37,9 @@ import numba
 import numpy as np
 import scipy.fft
 
-from itr_fv.backends import Backend, LoadCaseSolution, PreparedSystem, register_backend
-from itr_fv.krylov import ArrayOps, conjugate_gradients
-from itr_fv.problem import DiscreteSystem
+from itr_fv.discrete.problem import DiscreteSystem
+from itr_fv.solvers.backends import Backend, LoadCaseSolution, PreparedSystem, register_backend
+from itr_fv.solvers.krylov import ArrayOps, conjugate_gradients
 
 from . import _kernels as K
 from . import _mg_kernels as MG

@@ -3,8 +3,8 @@
 The same preconditioner as ``"itr_fft"`` (the exact inverse of the periodic 7-point
 Laplacian with face conductance ``g_ref``, the geometric mean of the positive face
 conductances, applied with real FFTs in float64) and the same CG
-(:func:`itr_fv.krylov.conjugate_gradients`), but the operator is
-:func:`itr_fv.model.apply_operator` (array expressions) and the vector operations are
+(:func:`itr_fv.solvers.krylov.conjugate_gradients`), but the operator is
+:func:`itr_fv.discrete.model.apply_operator` (array expressions) and the vector operations are
 numpy's. It needs no compiler and is the template of a new backend: one module, one
 registration. Slower than ``"itr_fft"`` (unfused array passes, one thread).
 
@@ -20,10 +20,10 @@ from typing import Any
 import numpy as np
 import scipy.fft
 
-from itr_fv.backends import Backend, LoadCaseSolution, PreparedSystem, register_backend
-from itr_fv.krylov import conjugate_gradients
-from itr_fv.model import apply_operator
-from itr_fv.problem import DiscreteSystem
+from itr_fv.discrete.model import apply_operator
+from itr_fv.discrete.problem import DiscreteSystem
+from itr_fv.solvers.backends import Backend, LoadCaseSolution, PreparedSystem, register_backend
+from itr_fv.solvers.krylov import conjugate_gradients
 
 from .spectral import inverse_laplacian
 

@@ -1,5 +1,5 @@
 """``itr_fft.homogenize``: the FFT solver's entry point (the ``"itr_fft"`` backend of
-:mod:`itr_fft.numba_backend` on the driver :func:`itr_fv.solve.homogenize`)."""
+:mod:`itr_fft.numba_backend` on the driver :func:`itr_fv.solvers.driver.homogenize`)."""
 
 from __future__ import annotations
 
@@ -7,13 +7,13 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from itr_fv.discrete.model import FaceGeometry
+from itr_fv.discrete.problem import DiscreteProblem
 from itr_fv.materials import Materials
-from itr_fv.microstructure import Microstructure
-from itr_fv.model import FaceGeometry
-from itr_fv.problem import DiscreteProblem
-from itr_fv.result import HomogenizationResult
-from itr_fv.solve import Callback
-from itr_fv.solve import homogenize as _drive
+from itr_fv.rve.microstructure import Microstructure
+from itr_fv.solvers.driver import Callback
+from itr_fv.solvers.driver import homogenize as _drive
+from itr_fv.solvers.result import HomogenizationResult
 
 from .numba_backend import NumbaFFTBackend
 
@@ -30,14 +30,14 @@ def homogenize(ms: Microstructure | DiscreteProblem, mat: Materials, tol: float 
                preconditioner: str = "auto") -> HomogenizationResult:
     """Effective conductivity tensor by FFT-preconditioned CG (same system as itr_fv).
 
-    The same as :func:`itr_fv.solve.homogenize` with
+    The same as :func:`itr_fv.solvers.driver.homogenize` with
     ``backend=NumbaFFTBackend(dtype, workers, reference, fft_dtype, preconditioner)``; the
     options are those of :class:`~itr_fft.numba_backend.NumbaFFTBackend`.
 
     Parameters
     ----------
     ms : Microstructure or DiscreteProblem
-        Voxel image with particle ids, or its :class:`~itr_fv.problem.DiscreteProblem`
+        Voxel image with particle ids, or its :class:`~itr_fv.discrete.problem.DiscreteProblem`
         (geometry built once, reused for many parameter sets).
     mat : Materials
         Conductivities (W/(m K)) and interface resistances (m^2 K/W).
@@ -67,8 +67,8 @@ def homogenize(ms: Microstructure | DiscreteProblem, mat: Materials, tol: float 
         threads, reference conductance of the FFT preconditioner, FFT precision, and the
         preconditioner: ``"auto"``, ``"fft"`` or ``"multigrid"``).
     check_memory : bool
-        Estimate the peak memory first (:mod:`itr_fv.resources`) and raise
-        :class:`~itr_fv.resources.InsufficientMemoryError` if it exceeds the available
+        Estimate the peak memory first (:mod:`itr_fv.solvers.resources`) and raise
+        :class:`~itr_fv.solvers.resources.InsufficientMemoryError` if it exceeds the available
         memory; False skips the check.
 
     Returns

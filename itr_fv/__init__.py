@@ -7,25 +7,28 @@ Public API::
     from itr_fv.rve import FillerSpec, generate_rve      # dense periodic packings
     from itr_fv import analytic                          # exact / reference formulas
 
-Modules: ``materials`` (phases, resistances), ``microstructure`` (voxel images),
-``psd`` (lognormal size distributions), ``packing`` and ``rve`` (RVE generation),
-``model`` (the discrete model both solvers solve; its parts: ``face_geometry``,
-``contact_zones``, ``cut_cells``, ``sphere_geometry``, ``interface_law`` (the staircase and
-segment laws), ``operator``, ``connectivity``), ``solver`` (this reference solver),
-``solve`` and ``result`` (shared by both solvers), ``warm_start``, ``analytic``,
-``vtk_output`` and ``particle_render`` (pyvista output), ``resources`` (the memory guard),
-``io`` (atomic writes, run manifests), ``checks`` (argument checks), ``numba_cache`` (where
-compiled kernels are cached: never inside the installed package).
+Subpackages, by job (each imports only those before it): ``materials`` (phases, interface
+resistances, parameter names, size distributions, the paper's tables), ``rve`` (RVE
+specification, packing, voxel images), ``discrete`` (the discrete model both solvers solve:
+face geometry, interface laws, operator, problem), ``output`` (VTK, renders) and
+``solvers`` (the driver, the backend registry, CG, the pyamg backend, the memory guard,
+warm starts, the result). Beside them: ``analytic`` (exact and reference formulas),
+``io`` (atomic writes, run manifests), ``checks`` (argument checks) and ``numba_cache``
+(where compiled kernels are cached: never inside the installed package). The module paths
+before this layout still import, with a DeprecationWarning (:mod:`itr_fv._moved`).
 """
 
+from . import _moved
 from .checks import PhysicalScaleWarning
-from .materials import Materials
-from .microstructure import Microstructure, ParticleTable
-from .resources import InsufficientMemoryError
-from .result import ConvergenceError, HomogenizationResult
-from .solver import homogenize
+from .materials.properties import Materials
+from .rve.microstructure import Microstructure, ParticleTable
+from .solvers.reference import homogenize
+from .solvers.resources import InsufficientMemoryError
+from .solvers.result import ConvergenceError, HomogenizationResult
 
 __all__ = ["Materials", "Microstructure", "ParticleTable", "homogenize",
            "HomogenizationResult", "ConvergenceError", "InsufficientMemoryError",
            "PhysicalScaleWarning"]
 __version__ = "0.1.0"
+
+_moved.install()

@@ -19,7 +19,7 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from itr_fv.parameters import is_log_scaled
+from itr_fv.materials.parameters import is_log_scaled
 
 __all__ = ["BASELINES", "make_baseline", "precision_check", "r2_score", "max_relative_error"]
 

@@ -44,7 +44,7 @@ starts; an error names the key. The file::
     values = { R_Al2O3_silicone = [1e-8, 1e-7] }       # grid
     # n = 20, seed = 0, bounds = { R_Al2O3_silicone = [1e-8, 5e-5] }  # space_filling
 
-Parameter names are the package's flat names (:mod:`itr_fv.parameters`). A task is one RVE
+Parameter names are the package's flat names (:mod:`itr_fv.materials.parameters`). A task is one RVE
 (formulation, replica) with one block of consecutive parameter sets: the runner builds the
 RVE and its discrete problem once per task and warm-starts every solve from the nearest
 solved set (:mod:`itr_surrogate.runner`).
@@ -63,11 +63,12 @@ from typing import Any
 
 import numpy as np
 
-from itr_fv import Materials, paper_data
-from itr_fv.formulation_names import UnknownFormulationError, formulation_name
-from itr_fv.paper_data import PAPER_SYSTEM, TABLE1
+from itr_fv import Materials
+from itr_fv.materials import paper_data
+from itr_fv.materials.formulation_names import UnknownFormulationError, formulation_name
+from itr_fv.materials.paper_data import PAPER_SYSTEM, TABLE1
 from itr_fv.rve import FillerSpec, packing_limit
-from itr_fv.rve_spec import RVESpec
+from itr_fv.rve.spec import RVESpec
 
 from . import design as designs
 from .solver_choice import check_solver
@@ -82,7 +83,7 @@ _TOP_KEYS = {"name", "box_um", "voxel_um", "replicas", "seed", "contact", "solve
              "matrix", "base", "formulation", "design"}
 _DESIGN_KEYS = {"table4": {"kind"}, "grid": {"kind", "values"},
                 "space_filling": {"kind", "n", "seed", "bounds"}}
-#: The file's keys that make its :class:`~itr_fv.rve_spec.RVESpec`.
+#: The file's keys that make its :class:`~itr_fv.rve.spec.RVESpec`.
 _RVE_KEYS = ("box_um", "voxel_um", "seed", "max_diameter_box_ratio", "min_gap_um")
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9.+-]*$")
 

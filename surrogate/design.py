@@ -1,7 +1,7 @@
 """Designs of a campaign: which parameter sets to solve.
 
 A design is an ordered list of parameter sets, each a mapping of the package's flat names
-(:mod:`itr_fv.parameters`) to values; names it leaves out keep the campaign's base values.
+(:mod:`itr_fv.materials.parameters`) to values; names it leaves out keep the campaign's base values.
 
 - :func:`grid`: the Cartesian product of value lists (the paper's Table 4 is one).
 - :func:`table4`: the paper's Table 4 grid for the fillers of a formulation, from the
@@ -21,8 +21,8 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
-from itr_fv import paper_data
-from itr_fv.parameters import is_log_scaled, parameter_name, parse_parameter
+from itr_fv.materials import paper_data
+from itr_fv.materials.parameters import is_log_scaled, parameter_name, parse_parameter
 
 __all__ = ["grid", "table4", "space_filling", "TABLE4_HYBRID_K"]
 

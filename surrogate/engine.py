@@ -8,7 +8,7 @@ the solver choice and the tolerance. :meth:`SolveEngine.solve` looks each reques
 process, on a LocalCluster (``workers``) or on a running scheduler (``scheduler``) -- and
 writes each finished solve at once as its own Parquet part (atomically; a kill loses at most
 the solves in flight, a re-run redoes none that finished). A worker rebuilds an RVE's voxels
-from its particle table and keeps one :class:`~itr_fv.problem.DiscreteProblem` per RVE and
+from its particle table and keeps one :class:`~itr_fv.discrete.problem.DiscreteProblem` per RVE and
 contact model (the geometry is built once per RVE per worker, never once per solve).
 
 Rows have the campaign's columns (:mod:`surrogate.runner`): the RVE id, contact, solver and
@@ -51,10 +51,10 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from itr_fv.discrete.problem import DiscreteProblem
 from itr_fv.io import atomic_path, counted
 from itr_fv.materials import Materials
-from itr_fv.microstructure import Microstructure
-from itr_fv.problem import DiscreteProblem
+from itr_fv.rve.microstructure import Microstructure
 
 from .solver_choice import check_solver, solver_backend, worker_resources
 from .store import rve_id, tensor_columns, tensor_of
@@ -243,7 +243,7 @@ def run_request(request: SolveRequest, threads: int | None = None) -> SolveResul
     """Solve one request in this process (the problem from the cache); ``threads`` of the
     FFT backend (None: its default for the grid; a Dask worker uses 1)."""
     from itr_fv.checks import VoxelContactWarning
-    from itr_fv.solve import homogenize
+    from itr_fv.solvers.driver import homogenize
 
     problem, built = cached_problem(request.rve, request.contact)
     backend = solver_backend(request.solver, request.rve.shape, threads=threads)
@@ -449,7 +449,7 @@ def open_client(workers: int | None, scheduler: str | None, *, memory_per_worker
             return Client(scheduler, timeout="5s"), None
         except (OSError, TimeoutError) as exc:
             raise ValueError(f"--scheduler: cannot reach {scheduler!r} ({exc})") from None
-    from itr_fv.resources import available_memory
+    from itr_fv.solvers.resources import available_memory
 
     gpu = needs_gpu(solver)
     if gpu:
@@ -575,7 +575,7 @@ class SolveEngine:
         needs them), checked by :func:`ready_workers` for ``solver`` before any submit."""
         with self._lock:
             if self._client is None:
-                from itr_fv.resources import estimate_peak_memory
+                from itr_fv.solvers.resources import estimate_peak_memory
                 need = worker_memory_limit(
                     estimate_peak_memory(shape, "itr_fft", store_fields=True))
                 self._client, self._cluster = open_client(

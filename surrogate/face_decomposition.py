@@ -1,17 +1,17 @@
 """Parameter dependence of the face conductances of one RVE, for the reduced-basis model.
 
-Every face of the discrete model (:mod:`itr_fv.model`) is a series of resistances: the two
+Every face of the discrete model (:mod:`itr_fv.discrete.model`) is a series of resistances: the two
 half voxels ``h / (2 k)``, the interface ``s R`` where the face crosses one, the matrix film
 ``d / k_m`` of the gap contact model, the segment lengths of the contact zones or of the cut
 cells (segment law). With the parameter vector ``rho`` made of ``1 / k`` for conductivities
 and ``R`` for resistances, the face resistance (m^2 K/W) is therefore *affine*; the interface
-law says so for each parameter kind (:attr:`itr_fv.interface_law.InterfaceLaw.affine_in`),
+law says so for each parameter kind (:attr:`itr_fv.discrete.interface_law.InterfaceLaw.affine_in`),
 and a parameter it is not affine in is refused::
 
     r_f(rho) = c_f + sum_i a_fi rho_i,      g_f = 1 / r_f      (W/(m^2 K))
 
 :class:`ResistanceDecomposition` finds ``c`` and ``a`` by evaluating the model itself
-(:meth:`itr_fv.model.FaceGeometry.conductances`) at a few parameter sets and checks that
+(:meth:`itr_fv.discrete.model.FaceGeometry.conductances`) at a few parameter sets and checks that
 the decomposition reproduces the model to round-off at a further one: the model lives in
 ``itr_fv`` only. The resistance is affine, so the complementary (flux) energy of the RVE is
 affine in ``rho`` exactly. The conductance ``g`` is not: faces whose resistance holds one
@@ -28,9 +28,9 @@ from collections.abc import Mapping
 
 import numpy as np
 
+from itr_fv.discrete.model import FaceGeometry
 from itr_fv.materials import Materials
-from itr_fv.model import FaceGeometry
-from itr_fv.parameters import is_log_scaled, parse_parameter
+from itr_fv.materials.parameters import is_log_scaled, parse_parameter
 
 __all__ = ["ParameterBox", "ResistanceDecomposition", "ConductanceInterpolation",
            "interpolation_coefficients"]

@@ -1,7 +1,7 @@
 """A certified reduced-basis surrogate of one RVE: k_eff for any parameter set in microseconds.
 
 For one RVE the discrete operator is ``A(mu) = D^T G(mu) D`` with ``G`` the diagonal of face
-conductances (:mod:`itr_fv.model`), and the effective tensor follows from two extremum
+conductances (:mod:`itr_fv.discrete.model`), and the effective tensor follows from two extremum
 principles of the same discrete model (``N`` voxels of edge ``h``, faces ``f``):
 
 - primal (temperature): ``K_ii = 1/(N h) min_theta sum_f g_f (D theta + l_i)_f^2`` with
@@ -42,11 +42,11 @@ from typing import Any
 import numpy as np
 import scipy.sparse
 
+from itr_fv.discrete.model import apply_operator
+from itr_fv.discrete.problem import DiscreteProblem
 from itr_fv.io import atomic_path
 from itr_fv.materials import Materials
-from itr_fv.microstructure import Microstructure
-from itr_fv.model import apply_operator
-from itr_fv.problem import DiscreteProblem
+from itr_fv.rve.microstructure import Microstructure
 
 from .face_decomposition import (
     ConductanceInterpolation,
@@ -123,7 +123,7 @@ class ReducedBasis:
         Values of every parameter; those in ``bounds`` vary, the others stay fixed.
         Contact spots (``Gc_*`` > 0) and insulating interfaces are not supported.
     bounds : mapping of str to (float, float)
-        Varied parameters by flat name (:mod:`itr_fv.parameters`): conductivities
+        Varied parameters by flat name (:mod:`itr_fv.materials.parameters`): conductivities
         ``k_<phase>`` in W/(m K) (sampled uniformly), resistances ``R_<A>_<B>`` and
         ``Rff_<A>_<B>`` in m^2 K/W (sampled log-uniformly).
     tol : float
@@ -240,7 +240,7 @@ class ReducedBasis:
             ``full_solve(problem, materials)`` returning an object with ``theta`` (one field
             per load case) and ``k_eff_energy`` (W/(m K)): how each snapshot is solved, e.g.
             through the solve engine (:mod:`surrogate.engine`) so that its snapshots are
-            kept and reused. Default: :func:`itr_fv.solve.homogenize` on the backend of
+            kept and reused. Default: :func:`itr_fv.solvers.driver.homogenize` on the backend of
             ``solver``. The greedy's choice depends only on the snapshots, so the same
             snapshots give the same model.
         """
@@ -309,7 +309,7 @@ class ReducedBasis:
         return self.interpolation_tol
 
     def _full_solver(self):
-        from itr_fv.solve import homogenize
+        from itr_fv.solvers.driver import homogenize
 
         def solve(problem, mat):
             backend = solver_backend(self.solver, problem.shape)

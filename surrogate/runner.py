@@ -2,7 +2,7 @@
 
 A task (:class:`~itr_surrogate.campaign.Task`) is one RVE and a block of parameter sets. On a
 worker, :func:`run_task` packs and voxelizes the RVE (seeded: the same table every time),
-builds its :class:`~itr_fv.problem.DiscreteProblem` once, and solves the block's parameter
+builds its :class:`~itr_fv.discrete.problem.DiscreteProblem` once, and solves the block's parameter
 sets in order, each warm-started from the nearest set already solved in the task. It writes
 nothing: it returns the rows and the RVE's particle table to the client. The driver
 (:func:`run_campaign`) submits the tasks whose part file is missing, shows a progress bar,
@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from itr_fv.io import counted
-from itr_fv.parameters import parse_parameter
+from itr_fv.materials.parameters import parse_parameter
 from itr_fv.rve import PackedRVE, build_rve
 
 from .campaign import Campaign, CampaignError, Task, nearest_solved
@@ -78,8 +78,8 @@ def run_task(campaign: dict, task: dict) -> dict:
     it writes no file).
     """
     from itr_fv import __version__
-    from itr_fv.problem import DiscreteProblem
-    from itr_fv.solve import homogenize
+    from itr_fv.discrete.problem import DiscreteProblem
+    from itr_fv.solvers.driver import homogenize
 
     t0 = time.perf_counter()
     camp = Campaign.from_dict(campaign)
@@ -144,7 +144,7 @@ def worker_memory(camp: Campaign) -> int:
     """Memory limit of a worker, bytes: the solver's peak estimate with the fields kept plus
     the warm-start fields of a block, sized by :func:`surrogate.engine.worker_memory_limit`
     (interpreter and allocator slack added, peak kept at dask's pause mark)."""
-    from itr_fv.resources import estimate_peak_memory
+    from itr_fv.solvers.resources import estimate_peak_memory
 
     from .engine import needs_gpu, worker_memory_limit
     from .solver_choice import SOLVER_CHOICES

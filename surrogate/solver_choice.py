@@ -1,11 +1,11 @@
 """The one place where a solver is chosen: campaign files, the reduced basis, identification
-and the command line name a solver here, and get a backend of :mod:`itr_fv.backends`.
+and the command line name a solver here, and get a backend of :mod:`itr_fv.solvers.backends`.
 
 A choice is ``"fft"`` (the numba FFT-PCG backend ``itr_fft``), ``"mg"`` (the same backend
 with the particle-deflated multigrid preconditioner, for high contrast and resistive
 interfaces), ``"gpu"`` (the array-API backend on a CUDA device), ``"fv"`` (the pyamg
 reference ``itr_fv``), ``"auto"`` (the cheaper one for the grid), or the name of any
-registered backend (``itr_fv.backends.available_backends()``, e.g. ``"scipy_fft"``).
+registered backend (``itr_fv.solvers.backends.available_backends()``, e.g. ``"scipy_fft"``).
 A choice that runs on a GPU asks the campaign engine's Dask workers for the resource
 ``GPU`` (:func:`worker_resources`; start such workers with ``--resources GPU=1``).
 
@@ -24,8 +24,8 @@ from collections.abc import Sequence
 import numpy as np
 
 import itr_fft  # noqa: F401 - registers the FFT backends
-from itr_fv.backends import Backend, available_backends, backend_for
-from itr_fv.solve import homogenize
+from itr_fv.solvers.backends import Backend, available_backends, backend_for
+from itr_fv.solvers.driver import homogenize
 
 __all__ = ["choose_solver", "check_solver", "solver_backend", "homogenize_auto",
            "worker_resources", "CROSSOVER_VOXELS", "SOLVER_CHOICES"]
@@ -86,6 +86,6 @@ def worker_resources(choice: str) -> dict[str, int] | None:
 
 
 def homogenize_auto(ms, mat, **kwargs):
-    """:func:`itr_fv.solve.homogenize` on the backend :func:`choose_solver` picks for the
+    """:func:`itr_fv.solvers.driver.homogenize` on the backend :func:`choose_solver` picks for the
     grid of ``ms`` (a Microstructure or a DiscreteProblem)."""
     return homogenize(ms, mat, backend=solver_backend("auto", ms.shape), **kwargs)

@@ -14,9 +14,9 @@ import pytest
 
 import itr_fft
 from itr_fft.array_api_backend import ArrayAPIBackend, _cuda_available, resolve_device
-from itr_fv.gallery import build, rve_cases
-from itr_fv.solve import homogenize
+from itr_fv.solvers.driver import homogenize
 from itr_surrogate.solver_choice import solver_backend, worker_resources
+from validation.gallery import build, rve_cases
 
 CASES = [c.name for c in rve_cases()]
 TOL = 1e-12

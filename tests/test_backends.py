@@ -12,8 +12,10 @@ import pytest
 
 import itr_fft  # noqa: F401 - registers the FFT backends
 import itr_fv
-from itr_fv import Materials, resources
-from itr_fv.backends import (
+from itr_fv import Materials
+from itr_fv.discrete.model import apply_operator
+from itr_fv.solvers import resources
+from itr_fv.solvers.backends import (
     Backend,
     LoadCaseSolution,
     PreparedSystem,
@@ -21,10 +23,9 @@ from itr_fv.backends import (
     backend_for,
     register_backend,
 )
-from itr_fv.gallery import build, rve_cases
-from itr_fv.krylov import conjugate_gradients
-from itr_fv.model import apply_operator
-from itr_fv.solve import homogenize
+from itr_fv.solvers.driver import homogenize
+from itr_fv.solvers.krylov import conjugate_gradients
+from validation.gallery import build, rve_cases
 
 CASES = [c.name for c in rve_cases()]
 

@@ -76,7 +76,7 @@ def test_runtime_failures_are_one_line_status_1_and_remove_the_new_folder(tmp_pa
 
 
 def test_convergence_failure_is_one_line(monkeypatch, tmp_path, capsys):
-    from itr_fv import solve
+    from itr_fv.solvers import driver as solve
     real = solve.homogenize
     monkeypatch.setattr(solve, "homogenize",
                         lambda *args, **kwargs: real(*args, **{**kwargs, "maxiter": 2}))
@@ -89,7 +89,7 @@ def test_convergence_failure_is_one_line(monkeypatch, tmp_path, capsys):
 
 
 def test_memory_refusal_is_one_line(monkeypatch, tmp_path, capsys):
-    from itr_fv import resources
+    from itr_fv.solvers import resources
     monkeypatch.setattr(resources, "available_memory", lambda: 10**6)
     status = main(["demo", "--box-um", "4", "--voxel-um", "0.25", "--fraction", "0.3",
                    "--out", str(tmp_path / "run")])

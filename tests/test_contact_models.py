@@ -10,8 +10,8 @@ import itr_fft
 import itr_fv
 from itr_fv import Materials, Microstructure, analytic
 from itr_fv.checks import VoxelContactWarning
-from itr_fv.gallery import touching_array
-from itr_fv.model import face_geometry
+from itr_fv.discrete.model import face_geometry
+from validation.gallery import touching_array
 
 A = 1.5e-6
 K_M = 0.18
@@ -155,7 +155,7 @@ def test_with_values_keeps_the_contact_model():
 
 
 def test_one_discrete_problem_serves_many_parameter_sets():
-    from itr_fv.problem import DiscreteProblem
+    from itr_fv.discrete.problem import DiscreteProblem
 
     ms, _ = sc_cell(10e-9, 8)
     problem = DiscreteProblem(ms, contact="gap")
@@ -183,7 +183,7 @@ def test_the_gap_model_is_the_default():
     """Materials, face_geometry and DiscreteProblem default to the gap model: a packing
     solves with the particle-matrix resistance alone, and a label image whose particles
     touch is refused with a message that names the per-area alternative."""
-    from itr_fv.problem import DiscreteProblem
+    from itr_fv.discrete.problem import DiscreteProblem
 
     mat = Materials({"silicone": K_M, "Al2O3": 30.0}, {("Al2O3", "silicone"): 2e-8},
                     "silicone")

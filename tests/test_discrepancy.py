@@ -17,9 +17,10 @@ import warnings
 import numpy as np
 import pytest
 
-from itr_fv import Microstructure, paper_data
+from itr_fv import Microstructure
+from itr_fv.materials import paper_data
 from itr_fv.rve import FillerSpec, generate_rve
-from itr_fv.rve_spec import RVESpec
+from itr_fv.rve.spec import RVESpec
 from itr_identify.cli import main
 from itr_identify.discrepancy import effects as fx
 from itr_identify.discrepancy.decision import find_discrepancy

@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from itr_fv.rve_spec import RVESpec
+from itr_fv.rve.spec import RVESpec
 from itr_identify.discrepancy import effects as fx
 from itr_identify.discrepancy.effects import (
     AIR_CONDUCTIVITY,

@@ -9,10 +9,11 @@ import pytest
 
 import itr_fft
 import itr_fv
-from itr_fv import ConvergenceError, Materials, Microstructure, solve
-from itr_fv.gallery import build, rve_cases, sphere_array
-from itr_fv.model import apply_operator, face_conductances, load_vector
-from itr_fv.problem import DiscreteProblem
+from itr_fv import ConvergenceError, Materials, Microstructure
+from itr_fv.discrete.model import apply_operator, face_conductances, load_vector
+from itr_fv.discrete.problem import DiscreteProblem
+from itr_fv.solvers import driver as solve
+from validation.gallery import build, rve_cases, sphere_array
 
 CASES = [c.name for c in rve_cases()]
 
@@ -59,7 +60,7 @@ def test_fft_matches_fv_on_common_set(name, contact, fft_solve):
 
 
 def test_operator_is_the_fv_operator():
-    """The numba stencil is A of itr_fv.model (same faces, same load vector)."""
+    """The numba stencil is A of itr_fv.discrete.model (same faces, same load vector)."""
     from itr_fft import _kernels as K
     ms, mat = build("random30", 24)
     g = face_conductances(ms, mat)
@@ -96,7 +97,7 @@ def test_warm_start_from_neighbouring_resistance(fft_solve):
     at a campaign tolerance of 1e-5 saves > 2x (measured 153 -> 56 iterations at 24^3).
     """
     ms, mat = build("al2o3_60", "ci")
-    geom = itr_fv.model.face_geometry(ms, contact=mat.contact)
+    geom = itr_fv.discrete.model.face_geometry(ms, contact=mat.contact)
     pairs = [("Al2O3", "silicone"), ("Al2O3", "Al2O3")]
     first = fft_solve(ms, mat.with_values(resistance={p: 1e-7 for p in pairs}),
                       tol=1e-8, geometry=geom)

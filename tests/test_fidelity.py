@@ -7,7 +7,7 @@ import math
 import numpy as np
 import pytest
 
-from itr_fv.rve_spec import RVESpec
+from itr_fv.rve.spec import RVESpec
 from itr_identify.forward.fidelity import (
     BIAS_ORDER,
     FIDELITY_LEVELS,

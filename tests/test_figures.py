@@ -12,7 +12,7 @@ import pytest
 matplotlib.use("Agg")
 
 from itr_fv.rve import FillerSpec, size_cut  # noqa: E402
-from itr_fv.rve_spec import RVESpec  # noqa: E402
+from itr_fv.rve.spec import RVESpec  # noqa: E402
 from itr_identify.forward.model import ForwardSettings  # noqa: E402
 from itr_identify.inference.screen import ScreenResult  # noqa: E402
 from itr_identify.reporting import figures  # noqa: E402
@@ -254,7 +254,7 @@ def test_rve_render_labels_its_three_axes_in_micrometres(tmp_path, monkeypatch):
 
     import pyvista as pv
 
-    from itr_fv.particle_render import render_particles
+    from itr_fv.output.particle_render import render_particles
     from itr_fv.rve import generate_rve
     calls = []
     show_bounds = pv.Plotter.show_bounds

@@ -9,7 +9,7 @@ import math
 import numpy as np
 import pytest
 
-from itr_fv.rve_spec import RVESpec
+from itr_fv.rve.spec import RVESpec
 from itr_identify.forward.model import PARAMETRISATIONS, ForwardModel, ForwardSettings, full_solve
 from itr_identify.inference.calibrate import calibrate, stages_of
 from itr_identify.inference.formulations import fractions_of

@@ -10,7 +10,7 @@ import sys
 import numpy as np
 import pytest
 
-from itr_fv import paper_data
+from itr_fv.materials import paper_data
 from itr_identify.cli import main
 from itr_identify.inference.formulations import formulation_name
 from itr_identify.inference.measurements import read_measurements, read_tester_readings

@@ -11,10 +11,9 @@ import pytest
 import itr_fft
 import itr_fv
 from itr_fv import Materials, Microstructure, analytic
-from itr_fv.cut_cells import SHARES, surface_cuts
-from itr_fv.face_geometry import face_geometry
-from itr_fv.gallery import touching_array
-from itr_fv.interface_law import (
+from itr_fv.discrete.cut_cells import SHARES, surface_cuts
+from itr_fv.discrete.face_geometry import face_geometry
+from itr_fv.discrete.interface_law import (
     LAW_NAMES,
     PARAMETER_KINDS,
     SHARE_NAMES,
@@ -22,9 +21,10 @@ from itr_fv.interface_law import (
     StaircaseLaw,
     interface_law,
 )
-from itr_fv.parameters import KINDS
-from itr_fv.problem import DiscreteProblem
+from itr_fv.discrete.problem import DiscreteProblem
+from itr_fv.materials.parameters import KINDS
 from itr_fv.rve import FillerSpec, generate_rve
+from validation.gallery import touching_array
 
 A = 1.0e-6
 K_M = 0.18

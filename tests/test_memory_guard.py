@@ -8,9 +8,10 @@ import itr_fft
 import itr_fv
 from itr_fft.multigrid import MG_BYTES_PER_VOXEL
 from itr_fft.numba_backend import FFT_BYTES_PER_VOXEL
-from itr_fv import Materials, resources
-from itr_fv.amg_backend import AMG_BYTES_PER_VOXEL
-from itr_fv.resources import InsufficientMemoryError, check_memory, estimate_peak_memory
+from itr_fv import Materials
+from itr_fv.solvers import resources
+from itr_fv.solvers.amg import AMG_BYTES_PER_VOXEL
+from itr_fv.solvers.resources import InsufficientMemoryError, check_memory, estimate_peak_memory
 
 MAT = Materials({"matrix": 1.0, "filler": 10.0}, {("filler", "matrix"): 0.05}, "matrix")
 
@@ -59,14 +60,14 @@ def test_solvers_refuse_before_any_work_and_can_be_told_to_go_ahead(solve, monke
     ms = sc_sphere(12, 0.2)
     calls = []
     monkeypatch.setattr(resources, "available_memory", lambda: 1000)  # 1 kB left
-    import itr_fv.problem
-    real = itr_fv.problem.face_geometry
+    import itr_fv.discrete.problem
+    real = itr_fv.discrete.problem.face_geometry
 
     def spy(*args, **kwargs):
         calls.append(1)
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(itr_fv.problem, "face_geometry", spy)
+    monkeypatch.setattr(itr_fv.discrete.problem, "face_geometry", spy)
     with pytest.raises(InsufficientMemoryError, match="12x12x12"):
         solve(ms, MAT, tol=1e-8)
     assert calls == []  # refused before the geometry was built

@@ -15,9 +15,9 @@ import itr_fft
 from itr_fft import _mg_kernels as MG
 from itr_fft.deflation import ParticleDeflation, group_operator
 from itr_fft.multigrid import AggregationMultigrid, _dense_operator
-from itr_fv.gallery import build, rve_cases
-from itr_fv.problem import DiscreteProblem
-from itr_fv.solve import homogenize
+from itr_fv.discrete.problem import DiscreteProblem
+from itr_fv.solvers.driver import homogenize
+from validation.gallery import build, rve_cases
 
 
 def _random_system(shape, seed, n_groups=3, contrast=1e3):

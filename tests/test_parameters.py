@@ -3,7 +3,7 @@
 import pytest
 
 from itr_fv import Materials
-from itr_fv.parameters import is_log_scaled, parameter_name, parse_parameter
+from itr_fv.materials.parameters import is_log_scaled, parameter_name, parse_parameter
 
 
 def test_names_sort_the_pair_and_parse_back():

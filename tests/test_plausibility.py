@@ -14,7 +14,7 @@ import pytest
 
 from itr_fv import Microstructure
 from itr_fv.analytic import hashin_shtrikman, hashin_shtrikman_multiphase
-from itr_fv.rve_spec import RVESpec
+from itr_fv.rve.spec import RVESpec
 from itr_identify.cli import main
 from itr_identify.inference.formulations import fractions_of
 from itr_identify.inference.measurements import read_measurements, read_tester_readings

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from scipy import integrate
 
-from itr_fv.paper_data import TABLE1
-from itr_fv.psd import (
+from itr_fv.materials.paper_data import TABLE1
+from itr_fv.materials.psd import (
     LogNormalPSD,
     fit_histogram,
     fit_sample,

@@ -9,7 +9,7 @@ import pytest
 
 import itr_fv
 from itr_fv import Materials
-from itr_fv.problem import DiscreteProblem
+from itr_fv.discrete.problem import DiscreteProblem
 from itr_fv.rve import FillerSpec, generate_rve
 from itr_surrogate.face_decomposition import ParameterBox, ResistanceDecomposition
 from itr_surrogate.reduced_basis import ReducedBasis, _divergence, _project_divergence_free

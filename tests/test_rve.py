@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from itr_fv.packing import check_overlaps, pack_spheres, pairs_within_gap
 from itr_fv.rve import FillerSpec, generate_rve, packing_limit
+from itr_fv.rve.packing import check_overlaps, pack_spheres, pairs_within_gap
 
 # small distributions so that small boxes are representative (default runs stay fast)
 SMALL = dict(mu=0.0, sigma=0.3)        # D ~ 1 um
@@ -233,7 +233,7 @@ def test_beyond_jamming_limit_states_estimate():
 
 
 def test_render_particles(tmp_path):
-    from itr_fv.particle_render import render_particles
+    from itr_fv.output.particle_render import render_particles
     ms = generate_rve([FillerSpec("Al2O3", volume_fraction=0.3, **SMALL),
                        FillerSpec("AlN", volume_fraction=0.2, **SMALL_WIDE)], 12.0, 0.125,
                       seed=1)

@@ -4,10 +4,10 @@ retry policy), one material system read by every user of the paper's data."""
 import numpy as np
 import pytest
 
-import itr_fv.rve as rve_module
-from itr_fv import paper_data
+import itr_fv.rve.generate as rve_module
+from itr_fv.materials import paper_data
 from itr_fv.rve import FillerSpec, build_rve, generate_rve
-from itr_fv.rve_spec import RVESpec, voxels_per_edge
+from itr_fv.rve.spec import RVESpec, voxels_per_edge
 from itr_identify.cli.dispatch import main
 
 pytestmark = pytest.mark.filterwarnings("ignore:.*box limits diameters:UserWarning")
@@ -100,9 +100,9 @@ def test_the_same_bad_box_gives_the_same_line_from_every_command(tmp_path, capsy
 
 
 def test_the_paper_material_system_is_read_once_by_every_user():
-    from itr_fv import gallery
     from itr_identify.discrepancy.effects import MatrixConductivity
     from itr_identify.forward.model import MATRIX
+    from validation import gallery
 
     system = paper_data.PAPER_SYSTEM
     # the paper's figures (Sec. 2.4 / 3.2 and Table 1), as transcribed in itr_fv/data
@@ -139,7 +139,7 @@ def test_film_and_psd_basis_are_stated_inputs_of_the_identification():
     packed = {basis: m.pack(0) for basis, m in models.items()}
     n = {basis: ms.n_particles for basis, ms in packed.items()}
     assert n["volume"] > 5 * n["number"]
-    from itr_fv.packing import pairs_within_gap
+    from itr_fv.rve.packing import pairs_within_gap
     t = packed["number"].particles
     _, _, gaps = pairs_within_gap(t.centers_m * 1e6, t.radii_m * 1e6, 12.0, 0.01)
     assert gaps.size and gaps.min() >= 0.002 - 1e-9

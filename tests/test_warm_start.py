@@ -7,9 +7,9 @@ import pytest
 
 import itr_fft
 from itr_fv import Materials, homogenize
-from itr_fv.model import apply_operator, face_geometry
+from itr_fv.discrete.model import apply_operator, face_geometry
 from itr_fv.rve import FillerSpec, generate_rve
-from itr_fv.warm_start import galerkin_start
+from itr_fv.solvers.warm_start import galerkin_start
 
 
 @pytest.fixture(scope="module")

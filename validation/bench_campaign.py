@@ -54,7 +54,7 @@ def materials(r: float):
 def in_process() -> dict[str, tuple[float, int]]:
     """Wall time and total iterations of the six solves, per mode."""
     import itr_fft
-    from itr_fv.problem import DiscreteProblem
+    from itr_fv.discrete.problem import DiscreteProblem
 
     out = {}
     t = time.perf_counter()

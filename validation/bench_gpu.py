@@ -43,9 +43,9 @@ from itr_fft.array_api_backend import (  # noqa: E402
     ArrayAPIBackend,
     _cuda_available,
 )
-from itr_fv.gallery import build  # noqa: E402
-from itr_fv.problem import DiscreteProblem  # noqa: E402
-from itr_fv.solve import homogenize  # noqa: E402
+from itr_fv.discrete.problem import DiscreteProblem  # noqa: E402
+from itr_fv.solvers.driver import homogenize  # noqa: E402
+from validation.gallery import build  # noqa: E402
 
 RESULTS = ROOT / "validation" / "results"
 CASE = "al2o3_60"

@@ -1,4 +1,4 @@
-"""Peak memory per voxel of each solver: the figures behind :mod:`itr_fv.resources`.
+"""Peak memory per voxel of each solver: the figures behind :mod:`itr_fv.solvers.resources`.
 
 Each (solver, dtype, grid) runs in a fresh interpreter (``bench_solvers.py --one``: the
 dense 60 % Al2O3 RVE of the common set, three load cases, store_fields=False); the cost per
@@ -30,7 +30,7 @@ def main() -> None:
     ap.add_argument("--fft", default="96,160,192")
     ap.add_argument("--out", default=str(ROOT / "validation" / "results" / "memory.md"))
     args = ap.parse_args()
-    from itr_fv import resources
+    from itr_fv.solvers import resources
 
     cases = [("itr_fv", int(n), "float64") for n in args.fv.split(",") if n]
     cases += [("itr_fft", int(n), dt) for dt in ("float64", "float32")

@@ -35,9 +35,9 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 import itr_fft  # noqa: E402
-from itr_fv.gallery import build, random_rve  # noqa: E402
-from itr_fv.problem import DiscreteProblem  # noqa: E402
-from itr_fv.solve import homogenize  # noqa: E402
+from itr_fv.discrete.problem import DiscreteProblem  # noqa: E402
+from itr_fv.solvers.driver import homogenize  # noqa: E402
+from validation.gallery import build, random_rve  # noqa: E402
 
 TOL = 1e-8
 RESULTS = ROOT / "validation" / "results"
@@ -55,7 +55,7 @@ def faithful_aln(n: int):
     """Dense 60 % AlN, 40 um box (250^3 = 0.16 um voxels), gap model, paper-level R."""
     ms, mat = random_rve(n, {"AlN": 0.60}, 40.0, 31,
                          {("AlN", "silicone"): 3e-8, ("AlN", "AlN"): 1e-7}, dense=True)
-    from itr_fv.gallery import with_contact
+    from validation.gallery import with_contact
     return ms, with_contact(mat, "gap")
 
 

@@ -103,7 +103,7 @@ def main() -> None:
                 f"{f.d_lo_um:.3g}-{f.d_hi_um:.3g} ({f.cut_volume_high:.1%}) |")
         rows.append((name, wall, rep))
         if args.render:
-            from itr_fv.particle_render import render_particles
+            from itr_fv.output.particle_render import render_particles
             render_particles(ms, str(Path(args.out).parent / f"rve_{name}.png"))
     lines += ["", "Notes:", "",
               "- time: generate_rve wall time (sampling, packing, exact check, voxelization, "

@@ -51,7 +51,7 @@ def _rss_mb() -> float:
 
 def one(solver: str, n: int, dtype: str = "float64") -> dict:
     """Solve CASE at n^3 with ``solver``; returns times, iterations, peak RSS (MB)."""
-    from itr_fv.gallery import build
+    from validation.gallery import build
     t = time.perf_counter()
     ms, mat = build(CASE, n)
     t_build = time.perf_counter() - t
@@ -60,7 +60,7 @@ def one(solver: str, n: int, dtype: str = "float64") -> dict:
         import itr_fft
 
         # compile/load the kernels outside the timing (cache=True makes this a load)
-        from itr_fv.gallery import build as _b
+        from validation.gallery import build as _b
         ms8, mat8 = _b(CASE, 16)
         itr_fft.homogenize(ms8, mat8, tol=1e-6, store_fields=False, dtype=np.dtype(dtype).type)
         rss_build = max(rss_build, _rss_mb())
@@ -70,7 +70,7 @@ def one(solver: str, n: int, dtype: str = "float64") -> dict:
                                  dtype=np.dtype(dtype).type)
     elif solver == "scipy_fft":
         import itr_fft  # noqa: F401 - registers the backend
-        from itr_fv.solve import homogenize
+        from itr_fv.solvers.driver import homogenize
         res = homogenize(ms, mat, backend="scipy_fft", tol=TOL, store_fields=False)
     else:
         import itr_fv
@@ -99,7 +99,7 @@ def studies(n_grid: tuple[int, int] = (64, 128)) -> dict:
     """Iterations vs grid, reference conductivity, warm start, profile (in this process)."""
     import itr_fft
     import itr_fv
-    from itr_fv.gallery import build, sphere_array
+    from validation.gallery import build, sphere_array
     out: dict = {}
     # iterations vs grid for fixed spheres (FCC f = 0.5 and the dense RVE)
     grid = []
@@ -122,7 +122,7 @@ def studies(n_grid: tuple[int, int] = (64, 128)) -> dict:
         refs.append((ref, r.info["g_ref"], r.iterations[0]))
     out["reference"] = refs
     # warm start: one step of Table 4 for both resistances
-    geom = itr_fv.model.face_geometry(ms, contact=mat.contact)
+    geom = itr_fv.discrete.model.face_geometry(ms, contact=mat.contact)
     pairs = [("Al2O3", "silicone"), ("Al2O3", "Al2O3")]
     warm = []
     for r1, r2 in ((1e-7, 5e-7), (5e-7, 1e-6), (1e-6, 5e-6)):
@@ -135,7 +135,7 @@ def studies(n_grid: tuple[int, int] = (64, 128)) -> dict:
         warm.append((r1, r2, sum(cold.iterations), sum(w.iterations),
                      float(w.residual_history[0][0])))
     out["warm"] = warm
-    from itr_fv.warm_start import galerkin_start
+    from itr_fv.solvers.warm_start import galerkin_start
     target = mat.with_values(resistance={p: 5e-7 for p in pairs})
     snaps = {r: itr_fft.homogenize(ms, mat.with_values(resistance={p: r for p in pairs}),
                                    tol=TOL, geometry=geom, directions=(0,)).theta
@@ -230,7 +230,7 @@ def write_report(rows: list[dict], st: dict, path: Path) -> None:
         lines += [f"| {a:g} | {b:g} | {c} | {d} | {e:.2e} |" for a, b, c, d, e in st["warm"]]
         g = st["galerkin"]
         lines += ["", "Energy-optimal start from several solved fields "
-                  "(`itr_fv.warm_start.galerkin_start`, load e1, target R = 5e-7 for both "
+                  "(`itr_fv.solvers.warm_start.galerkin_start`, load e1, target R = 5e-7 for both "
                   "resistances):", "",
                   "| snapshots (R) | iterations | initial rel. residual |", "| --- | --- | --- |"]
         lines += [f"| {a} | {b} | {c:.2e} |" for a, b, c in g]

@@ -101,8 +101,8 @@ def solve(solver: str, lattice: str, f: float, k_ratio: float, alpha: float, n: 
     ms, mat = unit_cell(lattice, f, k_ratio, alpha, n, rep=2 if solver == "fft_2x" else 1)
     t0 = time.perf_counter()
     if solver in SEGMENT_SOLVERS:
-        from itr_fv.interface_law import SegmentLaw
-        from itr_fv.problem import DiscreteProblem
+        from itr_fv.discrete.interface_law import SegmentLaw
+        from itr_fv.discrete.problem import DiscreteProblem
 
         mat = Materials(mat.conductivity,
                         {("filler", "matrix"): mat.resistance_between("filler", "matrix")},
@@ -221,7 +221,8 @@ def self_contact(lattice: str, f: float, n: int) -> bool:
     < a, the sphere and its image touch in the voxel image although the real array has a gap
     between them. Only SC at f = 0.5 (gap 0.015 L) is affected, at n <= 64. The model treats
     that bridge like any particle-particle contact (R(p, p) = alpha a, s = 1; see
-    ``itr_fv.face_geometry.self_image_faces``), as a 2 x 2 x 2 supercell with distinct ids would.
+    ``itr_fv.discrete.face_geometry.self_image_faces``), as a 2 x 2 x 2 supercell with distinct ids
+    would.
     """
     m = len(SITES[lattice])
     a = (3.0 * f / (4.0 * math.pi * m)) ** (1.0 / 3.0)
@@ -452,7 +453,8 @@ def write_report(rows: list[dict], elapsed: float | None = None) -> None:
                  "The model treats that image contact like any particle-particle contact: the "
                  "faces where a sphere meets its own periodic image carry R(p, p) = alpha a with "
                  "staircase factor s = 1 (line of centres along the axis; "
-                 "`itr_fv.face_geometry.self_image_faces`). The same array built as a 2 x 2 x 2 "
+                 "`itr_fv.discrete.face_geometry.self_image_faces`). The same array built "
+                 "as a 2 x 2 x 2 "
                  "supercell (8 spheres, 8 ids, grid 2n, i.e. the same voxel size), where the "
                  "bridge is an ordinary contact between two different particles, gives the same "
                  "k_xx:\n")
@@ -540,7 +542,7 @@ def _interface_laws(ser: dict) -> list[str]:
     if not any(k[0] == "fft_seg" for k in ser):
         return []
     L = ["## Interface laws: staircase vs segment (issue 28)\n",
-         "The segment law (`itr_fv.interface_law.SegmentLaw`, gap contacts: R at every "
+         "The segment law (`itr_fv.discrete.interface_law.SegmentLaw`, gap contacts: R at every "
          "particle-matrix crossing, the matrix film along each segment) with the staircase "
          "crossing share (`segment`) and the normal share (`segment, normal share`), FFT "
          "solver, against the staircase law above. `p` over the three finest grids of each "

@@ -27,8 +27,8 @@ sys.path.insert(0, str(ROOT))
 
 import itr_fft  # noqa: E402
 import itr_fv  # noqa: E402
-from itr_fv.gallery import build, rve_cases, with_contact  # noqa: E402
-from itr_fv.problem import DiscreteProblem  # noqa: E402
+from itr_fv.discrete.problem import DiscreteProblem  # noqa: E402
+from validation.gallery import build, rve_cases, with_contact  # noqa: E402
 
 TOL = 1e-10
 
@@ -119,7 +119,8 @@ def write_report(rows: list[dict], size: str, path: Path) -> None:
         "Contact models: `area` (per-area contact resistance of the case), `gap` (film "
         "between the analytic spheres, particle-matrix resistances only), `gap+spots` (gap "
         "with a 2e-6 W/K contact spot per touching pair), `segment` and `segment+spots` (the "
-        "gap model under the segment interface law, `itr_fv.interface_law.SegmentLaw`; RVEs "
+        "gap model under the segment interface law, "
+        "`itr_fv.discrete.interface_law.SegmentLaw`; RVEs "
         "with a particle table only).",
         "",
         "| contact | RVE | grid | k_eff diag FV (W/mK) | k_eff diag FFT (W/mK) | diff fft / "

@@ -49,9 +49,9 @@ from tqdm.auto import tqdm
 
 from itr_fv import Materials, Microstructure
 from itr_fv.io import write_text
-from itr_fv.paper_data import PAPER_SYSTEM, paper_parameters
+from itr_fv.materials.paper_data import PAPER_SYSTEM, paper_parameters
 from itr_fv.rve import FillerSpec, build_rve
-from itr_fv.rve_spec import RVESpec
+from itr_fv.rve.spec import RVESpec
 from itr_identify.discrepancy import effects as library
 from itr_identify.discrepancy.decision import find_discrepancy
 from itr_identify.discrepancy.settings import DiscrepancySettings

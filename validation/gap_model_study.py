@@ -4,9 +4,9 @@ SC, BCC and FCC arrays of spheres of radius a = 1.5 um whose nearest neighbours 
 separated by a matrix film of 1.5, 10 or 20 nm, particle-matrix resistance R_b = 2e-8 or
 5e-8 m^2 K/W, k_p = 30 or 200 W/(m K) in k_m = 0.18 W/(m K). Reference:
 ``itr_fv.analytic.sphere_array`` (the spheres with interface resistance R_b in the matrix:
-the film is the matrix between them). Cells from ``itr_fv.gallery.touching_array``.
+the film is the matrix between them). Cells from ``validation.gallery.touching_array``.
 Solvers: itr_fft and the FV reference itr_fv at tol 1e-8, ``contact="gap"``, h = a/8,
-a/12, a/16, under three interface laws (``itr_fv.interface_law``): the staircase law, the
+a/12, a/16, under three interface laws (``itr_fv.discrete.interface_law``): the staircase law, the
 segment law with the staircase crossing share and with the normal share (issue 28). The
 errors are itr_fft's; ``FV-FFT`` is the largest relative difference of the two solvers'
 diagonals over the three laws. Rows are kept in ``gap_model.csv`` (a re-run skips the
@@ -60,7 +60,7 @@ CSV = ROOT / "validation" / "results" / "gap_model.csv"
 
 
 def law_object(name: str):
-    from itr_fv.interface_law import SegmentLaw
+    from itr_fv.discrete.interface_law import SegmentLaw
 
     spec = LAWS[name]
     return spec if isinstance(spec, str) else SegmentLaw(share=spec[1])
@@ -70,8 +70,8 @@ def solve(per: int, lat: str, film: float, kp: float, rb: float, law: str) -> di
     import itr_fft
     import itr_fv
     from itr_fv import Materials, analytic
-    from itr_fv.gallery import touching_array
-    from itr_fv.problem import DiscreteProblem
+    from itr_fv.discrete.problem import DiscreteProblem
+    from validation.gallery import touching_array
 
     ms, f = touching_array(lat, A, film, per)
     mat = Materials({"silicone": K_M, "Al2O3": kp}, {("Al2O3", "silicone"): rb},

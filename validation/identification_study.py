@@ -47,7 +47,7 @@ TRUTH_SETS = 8
 
 def truth_set(par: str, settings, j: int) -> dict[str, float]:
     """Mean k_iso of 3 RVEs (packing seeds 40 + 7 j + r) per formulation, W/(m K)."""
-    from itr_fv import paper_data
+    from itr_fv.materials import paper_data
     from itr_identify.forward.model import PARAMETRISATIONS, ForwardModel, full_solve
     from itr_identify.inference.formulations import fractions_of
 

@@ -33,7 +33,7 @@ VARIANTS = {"reference": (0.0, "number"), "film 2 nm": (2.0, "number"),
 
 
 def campaign_dict(formulation: str, variant: str) -> dict:
-    from itr_fv.paper_data import TABLE1
+    from itr_fv.materials.paper_data import TABLE1
 
     filler, box, r = CASES[formulation]
     film, basis = VARIANTS[variant]

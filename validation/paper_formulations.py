@@ -5,7 +5,7 @@ box), voxelized and solved with itr_fft (tol 1e-6, three load cases) under the g
 model with the paper's particle-matrix resistances (Table 5: Al2O3-silicone 2.2e-8,
 AlN-silicone 3.0e-8 m^2 K/W) and no contact parameter: a contact is two particle-matrix
 interfaces and the true silicone film between the spheres (the paper's Eq. 6). k_Al2O3 =
-30, k_AlN = 200, k_silicone = 0.18 W/(m K) (the paper's values, ``itr_fv.paper_data``).
+30, k_AlN = 200, k_silicone = 0.18 W/(m K) (the paper's values, ``itr_fv.materials.paper_data``).
 Box and voxel are the recommended ones of ``box_size.md`` and ``resolution.md``: 24 um
 for Al2O3, 40 um for AlN and the hybrids, 0.16 um voxels; two packings (seeds 1, 2) per
 formulation. The table sets k_iso (trace / 3) beside the measured mean of Table 3 and the
@@ -66,7 +66,8 @@ def solve(name: str, fractions: dict, seed: int, voxel_um: float) -> dict:
     import numpy as np
 
     import itr_fft
-    from itr_fv import Materials, paper_data
+    from itr_fv import Materials
+    from itr_fv.materials import paper_data
     from itr_fv.rve import FillerSpec, generate_rve
 
     psd = paper_data.psd_lognormal()
@@ -91,7 +92,7 @@ def solve(name: str, fractions: dict, seed: int, voxel_um: float) -> dict:
 
 
 def report(rows: list[dict], voxel_um: float, out: Path) -> None:
-    from itr_fv import paper_data
+    from itr_fv.materials import paper_data
     from itr_identify.inference.measurements import read_measurements
 
     table3 = read_measurements()
@@ -142,7 +143,7 @@ def main() -> None:
     ap.add_argument("--out", default=str(ROOT / "validation" / "results"
                                          / "paper_formulations.md"))
     args = ap.parse_args()
-    from itr_fv import paper_data
+    from itr_fv.materials import paper_data
 
     store = Path(args.out).with_suffix(".csv")
     forms = paper_data.formulations()

@@ -46,7 +46,7 @@ def truth_k(filler: str, engine) -> dict[str, dict]:
     """Per formulation: the truth's k_iso per packing (fine, coarse, extrapolated) and
     their mean, W/(m K)."""
     from itr_fv.rve import FillerSpec, build_rve
-    from itr_fv.rve_spec import RVESpec
+    from itr_fv.rve.spec import RVESpec
     from itr_identify.forward.fidelity import BIAS_ORDER, richardson
     from itr_identify.forward.model import MATRIX, PARAMETRISATIONS, ForwardModel, ForwardSettings
     from itr_identify.inference.formulations import fractions_of

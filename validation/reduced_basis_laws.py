@@ -2,7 +2,7 @@
 
 One dense RVE (60 vol% Al2O3, Table 1's size distribution, 12 um box at 0.25 um = 48^3,
 seed 5, gap contacts) and the parameter box k_Al2O3 in [20, 40] W/(m K), R_Al2O3_silicone in
-[1e-8, 5e-5] m^2 K/W. For each law (``itr_fv.interface_law``: staircase, segment) the
+[1e-8, 5e-5] m^2 K/W. For each law (``itr_fv.discrete.interface_law``: staircase, segment) the
 reduced basis is fitted (tol 1e-4, at most 30 full solves, itr_fft at tol 1e-10) and
 compared with 30 held-out full solves (a Latin hypercube, log-uniform in R, seed 11; itr_fft,
 tol 1e-11, energy estimate): its error estimate must bound the true error of every diagonal
@@ -27,7 +27,7 @@ sys.path.insert(0, str(ROOT))
 
 import itr_fft  # noqa: E402
 from itr_fv import Materials  # noqa: E402
-from itr_fv.problem import DiscreteProblem  # noqa: E402
+from itr_fv.discrete.problem import DiscreteProblem  # noqa: E402
 from itr_fv.rve import FillerSpec, generate_rve  # noqa: E402
 from itr_surrogate.face_decomposition import ParameterBox  # noqa: E402
 from itr_surrogate.reduced_basis import ReducedBasis  # noqa: E402

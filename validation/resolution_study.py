@@ -53,7 +53,7 @@ def filler(model: str) -> str:
 
 def interface(model: str):
     """The interface law of a model: a name, or the segment law with the normal share."""
-    from itr_fv.interface_law import SegmentLaw
+    from itr_fv.discrete.interface_law import SegmentLaw
 
     if model.endswith("segment-normal"):
         return SegmentLaw(share="normal")
@@ -81,7 +81,7 @@ def solve(model: str, seed: int, h: float) -> dict:
     import itr_fft
     from itr_fv import Microstructure
     from itr_fv.checks import VoxelContactWarning
-    from itr_fv.problem import DiscreteProblem
+    from itr_fv.discrete.problem import DiscreteProblem
     from itr_fv.rve import FillerSpec, generate_rve
 
     with warnings.catch_warnings():

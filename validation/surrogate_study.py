@@ -32,8 +32,8 @@ from pathlib import Path
 import numpy as np
 
 import itr_fft
+from itr_fv.discrete.problem import DiscreteProblem
 from itr_fv.io import write_text
-from itr_fv.problem import DiscreteProblem
 from itr_surrogate.baselines import (
     BASELINES,
     make_baseline,

@@ -6,7 +6,8 @@ each) has the exact effective tensor ``K = k_par (I - n n) + k_perp n n`` with
 ``k_par = (k_a + k_m) / 2`` and ``1 / k_perp = (1/k_a + 1/k_m) / 2 + 2 R / P`` (P the period
 along the unit normal n). It has no curvature and no contacts, so whatever error a law has
 here is the error of representing a tilted resistive interface by one conductance per face
-of a 7-point stencil. Both laws of ``itr_fv.interface_law`` are applied to it unchanged: the
+of a 7-point stencil. Both laws of ``itr_fv.discrete.interface_law`` are applied to it unchanged:
+the
 staircase law to the label image with the staircase factor of n, the segment law to the
 segment geometry of the planes (lengths in each phase and one crossing per plane crossed,
 with either share). Solved with itr_fft (tol 1e-10, three load cases). Writes
@@ -30,11 +31,11 @@ sys.path.insert(0, str(ROOT))
 
 import itr_fft  # noqa: E402
 from itr_fv import Materials, Microstructure  # noqa: E402
-from itr_fv.cut_cells import SHARES, SurfaceCuts  # noqa: E402
-from itr_fv.face_geometry import FaceGeometry  # noqa: E402
-from itr_fv.interface_law import SegmentLaw, StaircaseLaw  # noqa: E402
-from itr_fv.problem import DiscreteProblem  # noqa: E402
-from itr_fv.sphere_geometry import staircase_factor  # noqa: E402
+from itr_fv.discrete.cut_cells import SHARES, SurfaceCuts  # noqa: E402
+from itr_fv.discrete.face_geometry import FaceGeometry  # noqa: E402
+from itr_fv.discrete.interface_law import SegmentLaw, StaircaseLaw  # noqa: E402
+from itr_fv.discrete.problem import DiscreteProblem  # noqa: E402
+from itr_fv.rve.sphere_geometry import staircase_factor  # noqa: E402
 
 OUT = ROOT / "validation" / "results" / "tilted_interface.md"
 L = 1e-5

@@ -193,7 +193,7 @@ def forward_settings(fw, args: argparse.Namespace):
         return fw.with_(**changes)
     except ValueError as exc:
         msg = str(exc)
-        # (the box/voxel rule's message stays as itr_fv.rve_spec words it: the same line
+        # (the box/voxel rule's message stays as itr_fv.rve.spec words it: the same line
         # from every command and from campaign files)
         for name, flag in (("box_um", "--box-um"), ("voxel_um", "--voxel-um"),
                            ("replicas", "--replicas")):

@@ -10,7 +10,7 @@ __all__ = ["add_parser"]
 
 
 def _run(args: argparse.Namespace) -> int:
-    from itr_fv.rve_spec import RVESpec
+    from itr_fv.rve.spec import RVESpec
 
     from ..workflows.demo import DemoSettings, run_demo
 

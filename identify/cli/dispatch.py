@@ -48,7 +48,7 @@ def _on_sigterm(signum, frame) -> None:
 def _runtime_message(exc: BaseException) -> tuple[str, int]:
     """One line and exit status for an exception raised while running."""
     from itr_fv import ConvergenceError
-    from itr_fv.resources import InsufficientMemoryError
+    from itr_fv.solvers.resources import InsufficientMemoryError
 
     if isinstance(exc, CLIError):
         return str(exc), exc.status

@@ -95,7 +95,7 @@ def _fit(args: argparse.Namespace) -> int:
               f"R^2 {model.r2_:.5f}")
         print(model.to_expression())
         return 0
-    from itr_fv.problem import DiscreteProblem
+    from itr_fv.discrete.problem import DiscreteProblem
     from itr_surrogate.reduced_basis import ReducedBasis
     from itr_surrogate.runner import campaign_rve
 

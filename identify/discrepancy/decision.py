@@ -247,7 +247,7 @@ def resistance_remarks(fit: ModelFit, st: DiscrepancySettings) -> list[str]:
     solved grid (the model cannot reach the data inside it), outside the physical range
     :attr:`DiscrepancySettings.physical_r_m2K_per_W`, or more than 5x from the paper's
     Table 5 value."""
-    from itr_fv.paper_data import paper_parameters
+    from itr_fv.materials.paper_data import paper_parameters
 
     paper = paper_parameters()
     grid = st.r_grid_m2K_per_W

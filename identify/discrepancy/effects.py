@@ -26,7 +26,7 @@ import numpy as np
 
 from itr_fv import Materials, Microstructure
 from itr_fv.analytic import maxwell_garnett
-from itr_fv.paper_data import PAPER_SYSTEM
+from itr_fv.materials.paper_data import PAPER_SYSTEM
 
 __all__ = ["Effect", "MatrixConductivity", "FillerConductivity", "Porosity",
            "FillerFraction", "ContactSpots", "TesterContact", "BatchFraction",

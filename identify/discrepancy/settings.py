@@ -6,7 +6,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from itr_fv.rve_spec import RVESpec
+from itr_fv.rve.spec import RVESpec
 
 from ..forward.fidelity import FaithfulRVE, faithful_for
 from ..forward.model import ForwardSettings

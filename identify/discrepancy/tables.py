@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from itr_fv.parameters import parameter_name
+from itr_fv.materials.parameters import parameter_name
 from itr_surrogate.engine import RVEData, SolveEngine, SolveRequest
 
 from ..forward.fidelity import Correction

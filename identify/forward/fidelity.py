@@ -39,7 +39,7 @@ from typing import Any
 
 import numpy as np
 
-from itr_fv.rve_spec import RVESpec, voxels_per_edge
+from itr_fv.rve.spec import RVESpec, voxels_per_edge
 
 __all__ = ["FaithfulRVE", "Correction", "richardson", "direction_scatter", "BIAS_ORDER",
            "BIAS_ORDER_SE", "FIDELITY_LEVELS", "faithful_for", "fidelity_name"]

@@ -15,7 +15,7 @@ box of its parameters, and measures the RVE-to-RVE scatter by full solves of eve
 at the centre of the box. Its prediction is the first replica's reduced basis scaled by the
 ratio of the replica mean to the first replica at the centre
 (:attr:`ForwardModel.replica_factor`). Filler and matrix conductivities stay at the paper's values
-(``itr_fv.paper_data.PAPER_CONDUCTIVITY``), as in the paper's screening.
+(``itr_fv.materials.paper_data.PAPER_CONDUCTIVITY``), as in the paper's screening.
 """
 
 from __future__ import annotations
@@ -30,11 +30,12 @@ from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 
-from itr_fv import Materials, paper_data
-from itr_fv.parameters import parameter_name
-from itr_fv.problem import DiscreteProblem
+from itr_fv import Materials
+from itr_fv.discrete.problem import DiscreteProblem
+from itr_fv.materials import paper_data
+from itr_fv.materials.parameters import parameter_name
 from itr_fv.rve import FillerSpec, build_rve
-from itr_fv.rve_spec import RVESpec
+from itr_fv.rve.spec import RVESpec
 from itr_surrogate.engine import (
     RVEData,
     SolveEngine,
@@ -119,7 +120,7 @@ class ForwardSettings:
     ----------
     rve : RVESpec
         Box, voxel (the paper: 40 and 0.1 um), size cuts, matrix film and the packing seed
-        of the first replica (:class:`itr_fv.rve_spec.RVESpec`, checked there).
+        of the first replica (:class:`itr_fv.rve.spec.RVESpec`, checked there).
     replicas : int
         RVE replicas per formulation (seeds ``rve.seed + 0, 1, ...``); the reduced basis is
         fitted on the first, all enter the RVE scatter and the validation.
@@ -202,7 +203,7 @@ def _specs(fractions: Mapping[str, float], basis: str = "number") -> list[Filler
 def full_solve(ms, materials: Materials, tol: float, *, engine: SolveEngine | None = None,
                **labels) -> np.ndarray:
     """Diagonal of k_eff (3,), W/(m K), of ``ms`` (a packed Microstructure, or its
-    :class:`~itr_fv.problem.DiscreteProblem`) by a full solve on the solve engine
+    :class:`~itr_fv.discrete.problem.DiscreteProblem`) by a full solve on the solve engine
     (:mod:`itr_surrogate.engine`; default: this process, no store). The engine keeps one
     discrete problem per RVE, so many solves of one RVE build its geometry once; the
     per-area contact model's VoxelContactWarning is silenced there (that parametrisation is

@@ -1,8 +1,8 @@
 """Formulation names (a Table 2 name, or ``<filler>-<vol%>`` pairs) and the one matcher of the
-names users write: :mod:`itr_fv.formulation_names`, re-exported here where the inference
+names users write: :mod:`itr_fv.materials.formulation_names`, re-exported here where the inference
 modules and the measurement readers have always found them."""
 
-from itr_fv.formulation_names import (
+from itr_fv.materials.formulation_names import (
     MIN_PERCENT,
     UnknownFormulationError,
     formulation_name,

@@ -219,7 +219,7 @@ def read_measurements(path: str | Path | None = None, *,
         A k below the matrix's conductivity.
     """
     if path is None:
-        from itr_fv import paper_data
+        from itr_fv.materials import paper_data
 
         p, text = Path("measured_tc.csv"), paper_data.table_text("measured_tc")
     else:

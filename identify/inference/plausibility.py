@@ -8,7 +8,7 @@ filler nearly insulating: it is warned about, not refused. A sample is 0.01 - 20
 (thermal interface materials and their tester samples); a thickness outside that range is
 usually in um or m under a ``_mm`` column.
 
-The phase conductivities are the paper's (:data:`itr_fv.paper_data.PAPER_CONDUCTIVITY`),
+The phase conductivities are the paper's (:data:`itr_fv.materials.paper_data.PAPER_CONDUCTIVITY`),
 the ones the identification solves with.
 """
 
@@ -16,8 +16,8 @@ from __future__ import annotations
 
 import warnings
 
-from itr_fv import paper_data
 from itr_fv.analytic import hashin_shtrikman_multiphase
+from itr_fv.materials import paper_data
 
 from .formulations import fractions_of
 

@@ -17,7 +17,7 @@ from collections.abc import Callable, Mapping
 
 import numpy as np
 
-from itr_fv import paper_data
+from itr_fv.materials import paper_data
 
 from ..forward.model import ForwardModel
 from .calibrate import Posterior, calibrate

@@ -12,10 +12,10 @@ from pathlib import Path
 
 import numpy as np
 
-from itr_fv import paper_data
 from itr_fv.io import atomic_path
-from itr_fv.parameters import parameter_name
-from itr_fv.psd import LogNormalPSD, fit_truncated_sample
+from itr_fv.materials import paper_data
+from itr_fv.materials.parameters import parameter_name
+from itr_fv.materials.psd import LogNormalPSD, fit_truncated_sample
 from itr_fv.rve import FillerSpec, SizeCut, size_cut
 
 from ..inference.pipeline import Identification
@@ -142,7 +142,7 @@ def rve_figure(ident: Identification, names: Sequence[str], path: Path) -> Path:
     """Fig. 4 analogue: off-screen renders of the first replica of ``names``."""
     import tempfile
 
-    from itr_fv.particle_render import render_particles
+    from itr_fv.output.particle_render import render_particles
 
     plt = _pyplot()
     names = [n for n in names if n in ident.models]

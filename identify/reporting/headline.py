@@ -35,7 +35,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 
-from itr_fv.parameters import parse_parameter
+from itr_fv.materials.parameters import parse_parameter
 
 from ..forward.fidelity import fidelity_name
 from ..inference.calibrate import EDGE_FACTOR, UNDETERMINED_DECADES

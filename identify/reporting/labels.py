@@ -1,5 +1,5 @@
 """Readable figure labels: the one place where a flat parameter name
-(:mod:`itr_fv.parameters`: ``k_<phase>``, ``R_<A>_<B>``, ``Rff_<A>_<B>``, ``Gc_<A>_<B>``)
+(:mod:`itr_fv.materials.parameters`: ``k_<phase>``, ``R_<A>_<B>``, ``Rff_<A>_<B>``, ``Gc_<A>_<B>``)
 becomes a symbol with its unit, in matplotlib mathtext.
 
 >>> parameter_label("R_Al2O3_silicone")
@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import re
 
-from itr_fv.parameters import UNITS, parse_parameter
+from itr_fv.materials.parameters import UNITS, parse_parameter
 
 __all__ = ["MICRO_M", "phase_label", "parameter_symbol", "parameter_unit", "parameter_label"]
 
@@ -45,7 +45,7 @@ def parameter_symbol(name: str) -> str:
 
 def parameter_unit(name: str) -> str:
     """The unit of a flat parameter name as figure text (``m$^2$ K/W``, ``W/(m K)``,
-    ``W/K``), from :data:`itr_fv.parameters.UNITS`."""
+    ``W/K``), from :data:`itr_fv.materials.parameters.UNITS`."""
     kind, _ = parse_parameter(name)
     return UNITS[kind].replace("^2", "$^2$")
 

@@ -7,9 +7,9 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from itr_fv import paper_data
-from itr_fv.parameters import parse_parameter
-from itr_fv.rve_spec import SEED_STRIDE
+from itr_fv.materials import paper_data
+from itr_fv.materials.parameters import parse_parameter
+from itr_fv.rve.spec import SEED_STRIDE
 
 from ..inference.measurements import Measurements
 from ..inference.pipeline import Identification

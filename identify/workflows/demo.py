@@ -25,8 +25,8 @@ from pathlib import Path
 
 import numpy as np
 
-from itr_fv import paper_data
-from itr_fv.rve_spec import RVESpec
+from itr_fv.materials import paper_data
+from itr_fv.rve.spec import RVESpec
 from itr_surrogate.solver_choice import check_solver
 
 __all__ = ["DemoSettings", "run_demo", "PAPER_R", "VOXEL_BIAS", "DEMO_SCATTER"]
@@ -134,7 +134,7 @@ def run_demo(settings: DemoSettings, out: Path, echo=print) -> list[Path]:
     from itr_fv import Materials
     from itr_fv.io import begin_run, write_manifest, write_text
     from itr_fv.rve import FillerSpec, build_rve
-    from itr_fv.solve import homogenize
+    from itr_fv.solvers.driver import homogenize
     from itr_surrogate.solver_choice import solver_backend
 
     begin_run(out)

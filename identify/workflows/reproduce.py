@@ -21,7 +21,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 from itr_fv.io import atomic_path, begin_run, counted, write_manifest, write_text
-from itr_fv.rve_spec import RVESpec
+from itr_fv.rve.spec import RVESpec
 from itr_surrogate.engine import SolveEngine
 
 from ..forward.fidelity import faithful_for, fidelity_name
@@ -95,7 +95,7 @@ def write_solves(idents: Sequence[Identification], path: Path) -> Path:
 def _temperature_field(ident: Identification, formulation: str, out: Path) -> list[Path]:
     """Full solve with fields of the first replica at the best values: .vti and a render
     (on this process's cached problem of that RVE: its geometry is not built again)."""
-    from itr_fv.solve import homogenize
+    from itr_fv.solvers.driver import homogenize
     from itr_surrogate.engine import RVEData, cached_problem
     from itr_surrogate.solver_choice import solver_backend
 
@@ -228,7 +228,7 @@ def _figures(idents: dict[str, Identification], validation: dict, out: Path
 
 def _reproduce_markdown(head, idents, meas, validation, lofo, psd_fits, timing,
                         settings) -> str:
-    from itr_fv import paper_data
+    from itr_fv.materials import paper_data
 
     table1 = paper_data.psd_lognormal()
     lines = ["# The paper's pipeline, reproduced (`itr reproduce`)", "",

@@ -8,7 +8,7 @@ geometry (box, particles) does not depend on the grid, so ``size="ci"`` and
 paper's Table 4 range (1e-8 .. 5e-5 m^2 K/W), one case has R = inf (floating particles).
 
 Dense packings use :func:`itr_fv.rve.generate_rve` when it is available, else the
-collective-rearrangement packer :func:`itr_fv.packing.pack_spheres` on lognormal radii.
+collective-rearrangement packer :func:`itr_fv.rve.packing.pack_spheres` on lognormal radii.
 """
 
 from __future__ import annotations
@@ -21,13 +21,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .materials import Materials
-from .microstructure import Microstructure
-from .paper_data import PAPER_SYSTEM
+from itr_fv.materials import Materials
+from itr_fv.materials.paper_data import PAPER_SYSTEM
+from itr_fv.rve.microstructure import Microstructure
 
 __all__ = ["RVECase", "rve_cases", "build", "K_SILICONE", "K_AL2O3", "K_ALN", "PSD"]
 
-#: the paper's conductivities, W/(m K) (:data:`itr_fv.paper_data.PAPER_SYSTEM`)
+#: the paper's conductivities, W/(m K) (:data:`itr_fv.materials.paper_data.PAPER_SYSTEM`)
 K_SILICONE = PAPER_SYSTEM.matrix_conductivity
 K_AL2O3 = PAPER_SYSTEM.filler("Al2O3").conductivity
 K_ALN = PAPER_SYSTEM.filler("AlN").conductivity
@@ -160,7 +160,7 @@ def random_rve(n: int, fillers: dict[str, float], box_um: float, seed: int,
     """Polydisperse random RVE: ``fillers`` maps phase -> volume fraction.
 
     ``dense=False``: random sequential addition. ``dense=True``: generate_rve when present
-    (issue-2 generator), else :func:`itr_fv.packing.pack_spheres`.
+    (issue-2 generator), else :func:`itr_fv.rve.packing.pack_spheres`.
     """
     names = tuple(fillers)
     centres, r, mats = _particles(tuple(fillers.items()), box_um, seed, dense)
@@ -199,7 +199,7 @@ def _particles(fillers: tuple[tuple[str, float], ...], box_um: float, seed: int,
         mats += [f] * r.size
     r = np.concatenate(radii)
     if dense:
-        from itr_fv.packing import pack_spheres
+        from itr_fv.rve.packing import pack_spheres
         centres = pack_spheres(r, box_um, rng, min_gap=0.0, inflate=1e-3,
                                max_iter=2_000_000).centers
     else:

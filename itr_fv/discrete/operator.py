@@ -1,9 +1,10 @@
-"""The discrete operator of :mod:`itr_fv.model` on a grid of face conductances: load vectors,
+"""The discrete operator of :mod:`itr_fv.discrete.model` on a grid of face conductances: load
+vectors,
 ``A theta``, face fluxes, the mean flux and the energy estimate of the effective tensor.
 
 Every function takes the face conductances ``g`` (W/(m^2 K), shape (3, n1, n2, n3),
 ``g[d][p]`` on the face between voxel p and p + e_d) that an interface law
-(:mod:`itr_fv.interface_law`) produced, so both solvers share them.
+(:mod:`itr_fv.discrete.interface_law`) produced, so both solvers share them.
 """
 
 from __future__ import annotations

@@ -15,8 +15,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .microstructure import Microstructure
-from .sphere_geometry import min_image, particle_material_ids, segment_in_sphere
+from ..rve.microstructure import Microstructure
+from ..rve.sphere_geometry import min_image, particle_material_ids, segment_in_sphere
 
 __all__ = ["DEFAULT_TOUCH_GAP_M", "SEGMENT_ZONE_VOXELS", "ContactZone", "near_contacts",
            "wedge_radius", "contact_zones", "contact_films", "fill_thin_films",
@@ -247,7 +247,7 @@ def zone_segments(ms: Microstructure, share: Callable[[np.ndarray, int], np.ndar
         With its particle table.
     share : callable or None
         Interface share of a surface crossing (see
-        :func:`itr_fv.sphere_geometry.segment_in_sphere`).
+        :func:`itr_fv.rve.sphere_geometry.segment_in_sphere`).
 
     Returns
     -------

@@ -3,7 +3,7 @@ the particle pairs in contact and their films, and (segment law) the cut cells.
 
 :func:`face_geometry` computes everything that does not depend on material values once; a
 parameter change only needs :meth:`FaceGeometry.conductances` again, which hands the
-geometry to its interface law (:mod:`itr_fv.interface_law`).
+geometry to its interface law (:mod:`itr_fv.discrete.interface_law`).
 """
 
 from __future__ import annotations
@@ -13,22 +13,14 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.ndimage
 
-from .contact_zones import (
-    DEFAULT_TOUCH_GAP_M,
-    contact_films,
-    fill_thin_films,
-    zone_segments,
-)
-from .cut_cells import SHARES, SurfaceCuts, surface_cuts
+from ..materials.properties import Materials
+from ..rve.microstructure import Microstructure
+from ..rve.sphere_geometry import min_image, particle_material_ids, staircase_factor
+from .contact_zones import DEFAULT_TOUCH_GAP_M, contact_films
+from .cut_cells import SurfaceCuts
 from .interface_law import InterfaceLaw, StaircaseLaw, interface_law
-from .materials import Materials
-from .microstructure import Microstructure
-from .sphere_geometry import min_image, particle_material_ids, staircase_factor
 
 __all__ = ["FaceGeometry", "face_geometry", "face_conductances", "self_image_faces"]
-
-_STAIRCASE_SHARE = SHARES["staircase"]
-
 
 @dataclass(frozen=True)
 class FaceGeometry:
@@ -74,15 +66,15 @@ class FaceGeometry:
         The contact model the geometry was built for (``"gap"`` or ``"area"``).
     filled_voxels : int
         Matrix voxels of thin wedges given to particles (gap model, see
-        :func:`itr_fv.contact_zones.fill_thin_films`).
+        :func:`itr_fv.discrete.contact_zones.fill_thin_films`).
     segments : tuple, or None
         Faces of the contact zones and their segment geometry
-        (:func:`itr_fv.contact_zones.zone_segments`; staircase law, gap model).
+        (:func:`itr_fv.discrete.contact_zones.zone_segments`; staircase law, gap model).
     particle_mat : ndarray of int64, or None
         Material id of every particle id (index 0: the matrix).
     law : InterfaceLaw
         The interface law that turns this geometry and a :class:`Materials` into face
-        conductances (:mod:`itr_fv.interface_law`).
+        conductances (:mod:`itr_fv.discrete.interface_law`).
     cuts : SurfaceCuts, or None
         Faces that meet a sphere, with their segment geometry (segment law).
     """
@@ -221,7 +213,7 @@ def face_geometry(ms: Microstructure, staircase: bool = True,
         the geometry's own ``material_ids`` then differ from the microstructure's there
         (staircase law only).
     interface : {"staircase", "segment"} or InterfaceLaw
-        The interface law (:func:`itr_fv.interface_law.interface_law`), by name or as an
+        The interface law (:func:`itr_fv.discrete.interface_law.interface_law`), by name or as an
         object (e.g. ``SegmentLaw(share="normal")``). The segment law needs the particle
         table and ``contact="gap"``; it fills no thin films.
 
@@ -232,14 +224,11 @@ def face_geometry(ms: Microstructure, staircase: bool = True,
     if not isinstance(ms, Microstructure):
         raise ValueError(f"ms: expected a Microstructure, got {type(ms).__name__}")
     law = interface_law(interface, contact)
-    if law.name == "segment" and ms.particles is None:
-        raise ValueError("interface: the segment law needs the particle table (a "
+    if law.needs_particles and ms.particles is None:
+        raise ValueError(f"interface: the {law.name} law needs the particle table (a "
                          "Microstructure from from_spheres or generate_rve)")
     shape, h = ms.shape, ms.voxel_m
-    pid, mid = ms.particle_ids, ms.material_ids
-    filled = 0
-    if contact == "gap" and ms.particles is not None and law.name == "staircase":
-        pid, mid, filled = fill_thin_films(ms)
+    pid, mid, filled = law.labels(ms)
     box = np.array(shape, dtype=np.float64) * h
     index, lo, hi, is_contact_all, s_all = [], [], [], [], []
     films, pair_keys, gaps, keys_seen = [], [], [], []
@@ -326,11 +315,7 @@ def face_geometry(ms: Microstructure, staircase: bool = True,
             pair_faces=counts,
             pair_material_ids=mat_of_particle[pairs].astype(np.int32),
             touch_gap_m=float(touch_gap_m), filled_voxels=filled,
-            segments=(zone_segments(ms, _STAIRCASE_SHARE if staircase else None)
-                      if contact == "gap" and law.name == "staircase" else None),
-            particle_mat=mat_of_particle)
-        if law.name == "segment":
-            extra["cuts"] = surface_cuts(ms, law.share)
+            particle_mat=mat_of_particle, **law.law_geometry(ms, staircase=staircase))
     return FaceGeometry(tuple(shape), float(h), tuple(ms.names), mid, tuple(index), tuple(lo),
                         tuple(hi), tuple(is_contact_all), tuple(s_all), mode,
                         contact_model=contact, law=law, **extra)

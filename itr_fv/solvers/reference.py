@@ -1,5 +1,5 @@
 """``itr_fv.homogenize``: the reference solver's entry point (the ``"itr_fv"`` backend of
-:mod:`itr_fv.amg_backend` on the driver :func:`itr_fv.solve.homogenize`)."""
+:mod:`itr_fv.solvers.amg` on the driver :func:`itr_fv.solvers.driver.homogenize`)."""
 
 from __future__ import annotations
 
@@ -7,14 +7,14 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from .amg_backend import AMGBackend
-from .materials import Materials
-from .microstructure import Microstructure
-from .model import FaceGeometry
-from .problem import DiscreteProblem
+from ..discrete.model import FaceGeometry
+from ..discrete.problem import DiscreteProblem
+from ..materials.properties import Materials
+from ..rve.microstructure import Microstructure
+from .amg import AMGBackend
+from .driver import Callback
+from .driver import homogenize as _drive
 from .result import HomogenizationResult
-from .solve import Callback
-from .solve import homogenize as _drive
 
 __all__ = ["homogenize"]
 
@@ -27,15 +27,15 @@ def homogenize(ms: Microstructure | DiscreteProblem, mat: Materials, tol: float 
                check_memory: bool = True) -> HomogenizationResult:
     """Effective conductivity tensor by the reference finite-volume solver.
 
-    Assembles the sparse operator of :mod:`itr_fv.model`, builds one pyamg hierarchy
+    Assembles the sparse operator of :mod:`itr_fv.discrete.model`, builds one pyamg hierarchy
     (classical or smoothed aggregation) and uses it as the CG preconditioner for every
-    load case. The same as :func:`itr_fv.solve.homogenize` with
+    load case. The same as :func:`itr_fv.solvers.driver.homogenize` with
     ``backend=AMGBackend(amg)``.
 
     Parameters
     ----------
     ms : Microstructure or DiscreteProblem
-        Voxel image with particle ids, or its :class:`~itr_fv.problem.DiscreteProblem`
+        Voxel image with particle ids, or its :class:`~itr_fv.discrete.problem.DiscreteProblem`
         (geometry built once, reused for many parameter sets).
     mat : Materials
         Conductivities (W/(m K)) and interface resistances (m^2 K/W).
@@ -58,10 +58,10 @@ def homogenize(ms: Microstructure | DiscreteProblem, mat: Materials, tol: float 
     geometry : FaceGeometry, optional
         Precomputed ``face_geometry(ms, staircase)`` to reuse across parameter sets.
     amg : {"classical", "smoothed_aggregation"}
-        pyamg hierarchy used as the preconditioner (see :class:`~itr_fv.amg_backend.AMGBackend`).
+        pyamg hierarchy used as the preconditioner (see :class:`~itr_fv.solvers.amg.AMGBackend`).
     check_memory : bool
-        Estimate the peak memory first (:mod:`itr_fv.resources`) and raise
-        :class:`~itr_fv.resources.InsufficientMemoryError` if it exceeds the available
+        Estimate the peak memory first (:mod:`itr_fv.solvers.resources`) and raise
+        :class:`~itr_fv.solvers.resources.InsufficientMemoryError` if it exceeds the available
         memory; False skips the check.
 
     Returns

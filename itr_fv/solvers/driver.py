@@ -2,11 +2,11 @@
 
 :func:`homogenize` checks the arguments, refuses a solve that cannot fit in memory before
 any work, builds the discrete system once, hands each load case's load vector to the
-backend (:mod:`itr_fv.backends`), fixes the gauge and builds the
-:class:`~itr_fv.result.HomogenizationResult` (tensor, fields, convergence verdict) once.
+backend (:mod:`itr_fv.solvers.backends`), fixes the gauge and builds the
+:class:`~itr_fv.solvers.result.HomogenizationResult` (tensor, fields, convergence verdict) once.
 ``itr_fv.homogenize`` and ``itr_fft.homogenize`` are thin entry points onto it::
 
-    from itr_fv.solve import homogenize
+    from itr_fv.solvers.driver import homogenize
     res = homogenize(problem, mat, backend="itr_fft", tol=1e-8)
     res = homogenize(problem, mat, backend=backend_for("itr_fft", dtype=np.float32), tol=2e-6)
 """
@@ -20,11 +20,7 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from . import resources
-from .backends import Backend, backend_for
-from .materials import Materials
-from .microstructure import Microstructure
-from .model import (
+from ..discrete.model import (
     FaceGeometry,
     cell_centres,
     energy_tensor,
@@ -32,7 +28,11 @@ from .model import (
     load_vector,
     mean_flux,
 )
-from .problem import DiscreteProblem
+from ..discrete.problem import DiscreteProblem
+from ..materials.properties import Materials
+from ..rve.microstructure import Microstructure
+from . import resources
+from .backends import Backend, backend_for
 from .result import ConvergenceError, FloatingClusters, HomogenizationResult
 
 __all__ = ["homogenize", "check_solver_args", "check_x0", "as_problem", "SolveRecord",
@@ -201,9 +201,9 @@ def homogenize(problem: Microstructure | DiscreteProblem, mat: Materials, *,
     mat : Materials
         Conductivities (W/(m K)) and interface resistances (m^2 K/W).
     backend : str or Backend
-        A registered name (:func:`itr_fv.backends.available_backends`: ``"itr_fv"`` pyamg,
+        A registered name (:func:`itr_fv.solvers.backends.available_backends`: ``"itr_fv"`` pyamg,
         ``"itr_fft"`` numba FFT-PCG, ``"scipy_fft"`` plain scipy FFT-PCG) or a configured
-        backend object (:func:`itr_fv.backends.backend_for`).
+        backend object (:func:`itr_fv.solvers.backends.backend_for`).
     tol : float
         Relative residual ||b - A theta|| / ||b|| to reach, in (0, 1), checked on the true
         residual.
@@ -221,11 +221,11 @@ def homogenize(problem: Microstructure | DiscreteProblem, mat: Materials, *,
     store_fields : bool
         Keep temperature, theta and face fluxes in the result.
     check_memory : bool
-        Refuse (:class:`~itr_fv.resources.InsufficientMemoryError`) a solve whose estimated
+        Refuse (:class:`~itr_fv.solvers.resources.InsufficientMemoryError`) a solve whose estimated
         peak exceeds the available memory, before any work.
     staircase, geometry
         How to build the problem from a Microstructure (staircase correction of interface
-        resistances; a precomputed :class:`~itr_fv.model.FaceGeometry`); not allowed with a
+        resistances; a precomputed :class:`~itr_fv.discrete.model.FaceGeometry`); not allowed with a
         DiscreteProblem's own geometry.
 
     Returns

@@ -2,11 +2,35 @@
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 import scipy.sparse
 import scipy.sparse.csgraph
 
-__all__ = ["connected_components"]
+__all__ = ["connected_components", "FloatingClusters"]
+
+
+@dataclass(frozen=True)
+class FloatingClusters:
+    """Voxel clusters cut off from the rest by insulating (R = inf) interfaces.
+
+    Their temperature level is undetermined (fixed to zero mean per cluster); they carry
+    no flux across their boundary but still conduct inside themselves.
+
+    Attributes
+    ----------
+    count : int
+        Number of clusters besides the largest connected one.
+    voxels : ndarray of int
+        Size (voxels) of each floating cluster.
+    volume_fraction : float
+        Fraction of the grid in floating clusters.
+    """
+
+    count: int
+    voxels: np.ndarray
+    volume_fraction: float
 
 
 def connected_components(g: np.ndarray) -> tuple[int, np.ndarray]:

@@ -9,7 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .checks import finite_number, phase_name
+from ..checks import finite_number, phase_name
 
 __all__ = ["Microstructure", "ParticleTable"]
 
@@ -159,7 +159,7 @@ class Microstructure:
             Phase per material id, ``names[0]`` the matrix.
         particles : ParticleTable, optional
             Sphere geometry if known. Without it the staircase correction is estimated
-            from the image (see :func:`itr_fv.model.face_geometry`).
+            from the image (see :func:`itr_fv.discrete.model.face_geometry`).
         """
         mid = _int_labels(material_ids, "material_ids")
         pid = _int_labels(particle_ids, "particle_ids")

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 from scipy import optimize, special
 
-from .checks import finite_number as _finite
+from ..checks import finite_number as _finite
 
 __all__ = ["LogNormalPSD", "HistogramFit", "fit_histogram", "fit_sample",
            "fit_truncated_sample", "histogram_from_sample", "phi_rcp_lognormal",
@@ -409,7 +409,7 @@ def plot_histogram_fit(fit: HistogramFit, path: str, title: str | None = None,
         ax.set_title(title)
     ax.legend(fontsize=8)
     fig.tight_layout()
-    from .io import atomic_path
+    from ..io import atomic_path
     with atomic_path(path) as tmp:
         fig.savefig(tmp, format=Path(path).suffix.lstrip(".") or "png")
     plt.close(fig)

@@ -10,7 +10,9 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 if TYPE_CHECKING:  # pragma: no cover
-    from .microstructure import Microstructure
+    from ..rve.microstructure import Microstructure
+
+from ..discrete.connectivity import FloatingClusters
 
 __all__ = ["HomogenizationResult", "ConvergenceError", "FloatingClusters"]
 
@@ -26,28 +28,6 @@ class ConvergenceError(RuntimeError):
         self.result = result
 
 
-@dataclass(frozen=True)
-class FloatingClusters:
-    """Voxel clusters cut off from the rest by insulating (R = inf) interfaces.
-
-    Their temperature level is undetermined (fixed to zero mean per cluster); they carry
-    no flux across their boundary but still conduct inside themselves.
-
-    Attributes
-    ----------
-    count : int
-        Number of clusters besides the largest connected one.
-    voxels : ndarray of int
-        Size (voxels) of each floating cluster.
-    volume_fraction : float
-        Fraction of the grid in floating clusters.
-    """
-
-    count: int
-    voxels: np.ndarray
-    volume_fraction: float
-
-
 @dataclass
 class HomogenizationResult:
     """Effective conductivity and fields from one homogenization.
@@ -60,7 +40,8 @@ class HomogenizationResult:
     k_eff_energy : ndarray, shape (3, 3)
         Variational estimate ``<dT_i g dT_j>`` of the same tensor, W/(m K): symmetric by
         construction, error quadratic in the solver error (see
-        :func:`itr_fv.model.energy_tensor`). Agrees with ``k_eff`` to about the solver tolerance.
+        :func:`itr_fv.discrete.model.energy_tensor`). Agrees with ``k_eff`` to about the solver
+        tolerance.
     directions : tuple of int
         The load cases solved, in order.
     iterations : list of int
@@ -127,18 +108,18 @@ class HomogenizationResult:
         """Write a compressed ``.vti`` image: material, particle id, temperature, its
         fluctuation, flux magnitude (and vectors) per load case; written atomically.
 
-        See :func:`itr_fv.vtk_output.write_vti`.
+        See :func:`itr_fv.output.vtk.write_vti`.
         """
-        from .vtk_output import write_vti
+        from ..output.vtk import write_vti
         return write_vti(self, path, load_cases=load_cases, vectors=vectors,
                          precision=precision)
 
     def render_png(self, path: str | Path, load_case: int = 0) -> Path:
         """Off-screen PNG: heat-flux magnitude and interfaces on mid-planes, phases, k_eff.
 
-        See :func:`itr_fv.vtk_output.render_png`.
+        See :func:`itr_fv.output.vtk.render_png`.
         """
-        from .vtk_output import render_png
+        from ..output.vtk import render_png
         return render_png(self, path, load_case=load_case)
 
     def summary(self) -> str:

@@ -3,7 +3,7 @@
 Without it a 400^3 RVE given to the FV solver ran for 31 s and died in the operator assembly
 with a MemoryError at 7.6 GB. The estimates are linear in the number of voxels N: each
 backend states its measured peak bytes per voxel
-(:meth:`itr_fv.backends.Backend.bytes_per_voxel`, measured as peak resident memory over a
+(:meth:`itr_fv.solvers.backends.Backend.bytes_per_voxel`, measured as peak resident memory over a
 fresh interpreter, dense 60 % Al2O3 RVE, three load cases, store_fields=False;
 ``validation/results/memory.md``, written by ``validation/bench_memory.py``), plus
 ``FIELD_BYTES_PER_VOXEL_CASE`` per load case when the fields are kept
@@ -113,8 +113,8 @@ def estimate_peak_memory(shape: Sequence[int], solver: "str | Backend", *,
     shape : (n1, n2, n3)
         Voxel grid.
     solver : str or Backend
-        A backend name (:func:`itr_fv.backends.available_backends`) or a configured backend;
-        its :meth:`~itr_fv.backends.Backend.bytes_per_voxel` is the measured cost.
+        A backend name (:func:`itr_fv.solvers.backends.available_backends`) or a configured backend;
+        its :meth:`~itr_fv.solvers.backends.Backend.bytes_per_voxel` is the measured cost.
     dtype : {"float64", "float32"}, optional
         CG vector precision, for a named backend that has this option.
     store_fields : bool

@@ -2,7 +2,7 @@
 
 A :class:`DiscreteProblem` holds what does not change when conductivities and resistances
 change: the microstructure, its interface faces with their staircase factors, contact pairs
-and film thicknesses (:class:`~itr_fv.model.FaceGeometry`) and the contact model. For every
+and film thicknesses (:class:`~itr_fv.discrete.model.FaceGeometry`) and the contact model. For every
 parameter set :meth:`DiscreteProblem.system` gives the face conductances and the clusters
 that insulating interfaces cut off. Both solvers take a problem in place of a
 microstructure, so a campaign builds it once per RVE::
@@ -20,12 +20,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .checks import PhysicalScaleWarning, VoxelContactWarning
+from ..checks import PhysicalScaleWarning, VoxelContactWarning
+from ..materials.properties import CONTACT_MODELS, Materials
+from ..rve.microstructure import Microstructure
+from .connectivity import FloatingClusters
 from .interface_law import InterfaceLaw
-from .materials import CONTACT_MODELS, Materials
-from .microstructure import Microstructure
 from .model import DEFAULT_TOUCH_GAP_M, FaceGeometry, connected_components, face_geometry
-from .result import FloatingClusters
 
 __all__ = ["DiscreteProblem", "DiscreteSystem", "floating_clusters", "IMPLAUSIBLE_VOXEL_M"]
 
@@ -86,7 +86,7 @@ class DiscreteProblem:
     geometry : FaceGeometry, optional
         A precomputed geometry of ``ms`` for this contact model.
     interface : {"staircase", "segment"} or InterfaceLaw
-        The interface law (:mod:`itr_fv.interface_law`): ``"staircase"`` (centre labels,
+        The interface law (:mod:`itr_fv.discrete.interface_law`): ``"staircase"`` (centre labels,
         half voxels, staircase factor) or ``"segment"`` (cut cells: lengths and crossings
         along every face's segment through the analytic spheres; gap contacts only).
     """

@@ -1,7 +1,7 @@
 """A material system: the matrix and the fillers a composite is made of, with their
 nominal conductivities and size distributions.
 
-The paper's system is :data:`itr_fv.paper_data.PAPER_SYSTEM` (read from the shipped data);
+The paper's system is :data:`itr_fv.materials.paper_data.PAPER_SYSTEM` (read from the shipped data);
 a user's own system is built the same way. Everything that needs a phase conductivity or
 a filler's size distribution by default reads it from a :class:`MaterialSystem`, and
 reports print the system they used.

@@ -19,8 +19,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from .materials import Materials
-from .model import FaceGeometry, apply_operator, load_vector
+from ..discrete.model import FaceGeometry, apply_operator, load_vector
+from ..materials.properties import Materials
 
 __all__ = ["galerkin_start"]
 
@@ -48,7 +48,7 @@ def galerkin_start(geometry: FaceGeometry, mat: Materials,
         Pass as ``x0`` to ``itr_fv.homogenize`` or ``itr_fft.homogenize``.
     """
     if not isinstance(geometry, FaceGeometry):
-        raise ValueError("geometry: expected a FaceGeometry (itr_fv.model.face_geometry)")
+        raise ValueError("geometry: expected a FaceGeometry (itr_fv.discrete.model.face_geometry)")
     dirs = tuple(int(d) for d in directions)
     want = (len(dirs),) + tuple(geometry.shape)
     snaps = [np.asarray(s, dtype=np.float64) for s in snapshots]

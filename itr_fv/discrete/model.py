@@ -24,8 +24,9 @@ resistance depends on the contact model of :class:`~itr_fv.materials.Materials`:
 - ``contact="area"``: ``R_pq = R(material_p, material_q)`` per unit face area, the paper's
   per-area R_ff (a property of the voxel, not of the material).
 
-This is the staircase law (:class:`~itr_fv.interface_law.StaircaseLaw`, the default). The
-segment law (:class:`~itr_fv.interface_law.SegmentLaw`, ``interface="segment"``) replaces the
+This is the staircase law (:class:`~itr_fv.discrete.interface_law.StaircaseLaw`, the default). The
+segment law (:class:`~itr_fv.discrete.interface_law.SegmentLaw`, ``interface="segment"``) replaces
+the
 half voxels and ``s R`` at every face whose centre-to-centre segment meets a sphere by the
 exact lengths along that segment and one share ``w R`` per surface crossing::
 
@@ -33,11 +34,12 @@ exact lengths along that segment and one share ``w R`` per surface crossing::
 
 Either way the operator is the same 7-point stencil with one conductance per face.
 
-The model is split by job: :mod:`itr_fv.face_geometry` (interface faces, staircase
-factors, contact pairs), :mod:`itr_fv.contact_zones` (films between nearly touching
-spheres), :mod:`itr_fv.cut_cells` (segments through spheres), :mod:`itr_fv.interface_law`
-(geometry + materials -> conductances), :mod:`itr_fv.operator` (load, ``A theta``, fluxes,
-energy) and :mod:`itr_fv.connectivity`; this module gathers their public names.
+The model is split by job: :mod:`itr_fv.discrete.face_geometry` (interface faces, staircase
+factors, contact pairs), :mod:`itr_fv.discrete.contact_zones` (films between nearly touching
+spheres), :mod:`itr_fv.discrete.cut_cells` (segments through spheres),
+:mod:`itr_fv.discrete.interface_law`
+(geometry + materials -> conductances), :mod:`itr_fv.discrete.operator` (load, ``A theta``, fluxes,
+energy) and :mod:`itr_fv.discrete.connectivity`; this module gathers their public names.
 
 Layout convention: ``g[d][i, j, k]`` is the face between voxel (i, j, k) and its periodic
 neighbour (i, j, k) + e_d. With the periodic split T = -E.x + theta, conservation in

@@ -1,5 +1,5 @@
 """The reference backend ``"itr_fv"``: sparse 7-point assembly, a pyamg hierarchy as the
-preconditioner of :func:`itr_fv.krylov.conjugate_gradients`.
+preconditioner of :func:`itr_fv.solvers.krylov.conjugate_gradients`.
 
 The singular periodic operator is made definite by pinning one voxel per connected cluster
 (:func:`pin`); the hierarchy (Ruge-Stueben classical AMG by default, or smoothed
@@ -17,9 +17,9 @@ import numpy as np
 import pyamg
 import scipy.sparse
 
+from ..discrete.problem import DiscreteSystem
 from .backends import Backend, LoadCaseSolution, PreparedSystem, register_backend
 from .krylov import conjugate_gradients
-from .problem import DiscreteSystem
 
 __all__ = ["AMGBackend", "assemble_operator", "pin", "AMG_BYTES_PER_VOXEL"]
 
@@ -36,7 +36,7 @@ def assemble_operator(g: np.ndarray) -> scipy.sparse.csr_array:
     Parameters
     ----------
     g : ndarray, shape (3, n1, n2, n3)
-        Face conductances from :mod:`itr_fv.model`.
+        Face conductances from :mod:`itr_fv.discrete.model`.
 
     Returns
     -------

@@ -6,7 +6,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from .microstructure import Microstructure
+from ..rve.microstructure import Microstructure
 from .offscreen import DEFAULT_COLORS, PALETTE, offscreen_plotter
 
 __all__ = ["render_particles"]
@@ -64,7 +64,7 @@ def render_particles(ms: Microstructure, path: str, colors: Mapping[str, str] | 
     """
     import pyvista as pv
 
-    from .io import atomic_path, output_file
+    from ..io import atomic_path, output_file
 
     output_file(path, ".png")
     if ms.particles is None or len(ms.particles) == 0:

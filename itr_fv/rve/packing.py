@@ -35,7 +35,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .numba_cache import njit
+from ..numba_cache import njit
 
 __all__ = ["PackingResult", "pack_spheres", "pairs_within_gap", "check_overlaps"]
 

@@ -1,7 +1,7 @@
 """The backend protocol and the registry of solver backends.
 
-A backend solves the linear systems of one discrete problem (:mod:`itr_fv.problem`) for
-the solve driver (:func:`itr_fv.solve.homogenize`), which does everything else (argument
+A backend solves the linear systems of one discrete problem (:mod:`itr_fv.discrete.problem`) for
+the solve driver (:func:`itr_fv.solvers.driver.homogenize`), which does everything else (argument
 checks, the system's face conductances, load vectors, the gauge, the result). A backend
 
 - has a ``name`` (the ``solver`` of a result, the ``backend=`` argument of the driver),
@@ -9,7 +9,8 @@ checks, the system's face conductances, load vectors, the gauge, the result). A 
   guard before any work),
 - prepares one system (:meth:`Backend.prepare`: the AMG hierarchy, the FFT symbols and
   ``g_ref``), and the prepared system solves one load case at a time with
-  ``solve(b, x0, tol, maxiter, callback)``, written over :func:`itr_fv.krylov.conjugate_gradients`.
+  ``solve(b, x0, tol, maxiter, callback)``, written over
+  :func:`itr_fv.solvers.krylov.conjugate_gradients`.
 
 Backends register themselves (:func:`register_backend`) when their module is imported;
 installed packages also announce them under the entry-point group ``itr.backends``
@@ -27,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from .problem import DiscreteSystem
+from ..discrete.problem import DiscreteSystem
 
 __all__ = ["Backend", "PreparedSystem", "LoadCaseSolution", "register_backend",
            "backend_for", "available_backends", "ENTRY_POINT_GROUP"]

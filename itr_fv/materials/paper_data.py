@@ -6,7 +6,7 @@ Sections 2.4 and 3.2 in ``conductivities.csv``); ``data/README.md`` lists the pa
 inconsistencies. Readers return plain Python structures; units are in the column names
 (W/(m K), m^2 K/W, volume per cent, micrometres). :data:`PAPER_SYSTEM` is the paper's
 material system (matrix, fillers, Table 1 size distributions, conductivities) as one
-:class:`~itr_fv.material_system.MaterialSystem`; :data:`TABLE1` and
+:class:`~itr_fv.materials.material_system.MaterialSystem`; :data:`TABLE1` and
 :data:`PAPER_CONDUCTIVITY` are views of it.
 """
 

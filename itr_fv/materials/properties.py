@@ -7,13 +7,13 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
-from .checks import phase_name as _check_name
-from .checks import real_number
+from ..checks import phase_name as _check_name
+from ..checks import real_number
 from .parameters import UNITS, parameter_name, parse_parameter
 
 __all__ = ["Materials", "CONTACT_MODELS"]
 
-#: Models of the faces between two different particles (see :mod:`itr_fv.model`).
+#: Models of the faces between two different particles (see :mod:`itr_fv.discrete.model`).
 CONTACT_MODELS = ("gap", "area")
 
 
@@ -43,7 +43,7 @@ class Materials:
     matrix : str
         Name of the matrix (continuous) phase; must be a key of ``conductivity``.
     contact : {"gap", "area"}
-        Model of the faces between two *different* particles (see :mod:`itr_fv.model`).
+        Model of the faces between two *different* particles (see :mod:`itr_fv.discrete.model`).
         ``"gap"`` (default): the paper's Eq. 6 applied locally, the two particle-matrix
         resistances and the true matrix film between the analytic spheres,
         ``s (R_b,p + R_b,q + d(x_f) / k_m)``; no same-pair entry is needed and k_eff
@@ -191,7 +191,7 @@ class Materials:
 
     # ------------------------------------------------------- flat parameters
     def to_parameters(self) -> dict[str, float]:
-        """The values under the package's flat names (:mod:`itr_fv.parameters`).
+        """The values under the package's flat names (:mod:`itr_fv.materials.parameters`).
 
         ``k_<phase>`` for every phase, ``R_<A>_<B>`` for every pair with the matrix, and for
         pairs of fillers ``Rff_<A>_<B>`` (``contact="area"``; the gap model does not use

@@ -21,13 +21,12 @@ such a mapping.
 
 from __future__ import annotations
 
-from .interface_law import PARAMETER_KINDS
-
 __all__ = ["KINDS", "UNITS", "parameter_name", "parse_parameter", "is_log_scaled"]
 
-#: Parameter kinds and the number of phase names each takes: the union of what the interface
-#: laws read (:data:`itr_fv.interface_law.PARAMETER_KINDS`).
-KINDS = PARAMETER_KINDS
+#: Parameter kinds and the number of phase names each takes (a conductivity names one phase,
+#: the rest two). Every interface law reads kinds of this table only, and together they read
+#: all of it (:data:`itr_fv.discrete.interface_law.PARAMETER_KINDS` checks both on import).
+KINDS = {"k": 1, "R": 2, "Gc": 2, "Rff": 2}
 #: Unit of each kind.
 UNITS = {"k": "W/(m K)", "R": "m^2 K/W", "Gc": "W/K", "Rff": "m^2 K/W"}
 

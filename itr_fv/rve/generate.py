@@ -2,7 +2,7 @@
 
 :func:`generate_rve` draws number-weighted lognormal diameters for one or more fillers
 (:class:`FillerSpec`, Table 1 parameters), packs them without overlap in a periodic cube
-(:func:`itr_fv.packing.pack_spheres`) up to the target volume fraction of every filler,
+(:func:`itr_fv.rve.packing.pack_spheres`) up to the target volume fraction of every filler,
 and voxelizes them with particle ids (:meth:`Microstructure.from_spheres`).
 
 The quality report (:class:`RVEReport`) is returned next to the microstructure when
@@ -30,7 +30,7 @@ are reported per filler; :func:`size_cut` computes them for one filler without p
 Packing limit
 -------------
 The sum of the target fractions must stay below the random-close-packing estimate of
-:func:`itr_fv.psd.phi_rcp_lognormal` (Farr 2013) evaluated at the standard deviation of
+:func:`itr_fv.materials.psd.phi_rcp_lognormal` (Farr 2013) evaluated at the standard deviation of
 ``ln D`` of the number-weighted, truncated mixture of all fillers; a target above it raises
 ``ValueError`` that states the estimate. (For a mixture of two lognormals this is an
 approximation of the Farr-Groot model; near the limit the packer may also fail, which
@@ -49,17 +49,17 @@ from typing import NamedTuple
 import numpy as np
 from scipy import special, stats
 
-from .checks import finite_number as _num
-from .microstructure import Microstructure
-from .packing import pack_spheres, pairs_within_gap
-from .paper_data import TABLE1
-from .psd import (
+from ..checks import finite_number as _num
+from ..materials.paper_data import TABLE1
+from ..materials.psd import (
     LogNormalPSD,
     fit_sample,
     fit_truncated_sample,
     phi_rcp_lognormal,
 )
-from .rve_spec import RVESpec, voxels_per_edge
+from .microstructure import Microstructure
+from .packing import pack_spheres, pairs_within_gap
+from .spec import RVESpec, voxels_per_edge
 
 __all__ = ["FillerSpec", "FillerReport", "RVEReport", "generate_rve", "packing_limit",
            "build_rve", "PackedRVE", "SizeCut", "size_cut"]
@@ -267,7 +267,7 @@ def packing_limit(specs: Sequence[FillerSpec], cuts: Sequence[tuple[float, float
                   ) -> tuple[float, float]:
     """Random-close-packing estimate for a set of fillers.
 
-    Farr's lognormal fit (:func:`itr_fv.psd.phi_rcp_lognormal`) evaluated at the standard
+    Farr's lognormal fit (:func:`itr_fv.materials.psd.phi_rcp_lognormal`) evaluated at the standard
     deviation of ``ln D`` of the number-weighted mixture (each filler truncated to its
     ``cuts`` ``(d_lo_um, d_hi_um)`` when given).
 
@@ -463,7 +463,7 @@ def generate_rve(specs: Sequence[FillerSpec] | FillerSpec, box_um: float, voxel_
         Gap threshold for the coordination number, um (default ``voxel_um / 2``).
     inflate : float
         Relative safety margin of the packer's contact distance (see
-        :func:`itr_fv.packing.pack_spheres`).
+        :func:`itr_fv.rve.packing.pack_spheres`).
     max_iter : int
         Sweep limit of the packer.
     sampling : {"stratified", "iid"}
@@ -666,7 +666,7 @@ def build_rve(spec: RVESpec, fillers: Sequence[FillerSpec] | FillerSpec, replica
     ValueError
         Bad fillers for this box and voxel (see :func:`generate_rve`).
     RuntimeError
-        No packing succeeded in :data:`~itr_fv.rve_spec.PACKING_ATTEMPTS` draws.
+        No packing succeeded in :data:`~itr_fv.rve.spec.PACKING_ATTEMPTS` draws.
     """
     if not isinstance(spec, RVESpec):
         raise ValueError(f"spec: expected an RVESpec, got {type(spec).__name__}")

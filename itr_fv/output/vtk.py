@@ -11,7 +11,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
-from .io import atomic_path, output_file
+from ..io import atomic_path, output_file
 from .offscreen import DEFAULT_COLORS, PALETTE, offscreen_plotter
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -19,7 +19,7 @@ if TYPE_CHECKING:  # pragma: no cover
 
 
 class FieldResult(Protocol):
-    """What this module reads of a :class:`~itr_fv.result.HomogenizationResult` (named
+    """What this module reads of a :class:`~itr_fv.solvers.result.HomogenizationResult` (named
     structurally, so that the result may import this module and not the other way round)."""
 
     k_eff: np.ndarray

@@ -1,6 +1,6 @@
 """Cut cells: the faces whose centre-to-centre segment meets a sphere surface.
 
-For the segment interface law (:class:`itr_fv.interface_law.SegmentLaw`) every face between
+For the segment interface law (:class:`itr_fv.discrete.interface_law.SegmentLaw`) every face between
 voxel centres x_p and x_p + h e_d takes its geometry from the analytic spheres along that
 segment, not from the two voxel labels: the length of the segment inside each filler (the
 rest is matrix) and, at every place the segment crosses a sphere surface, the interface
@@ -15,8 +15,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .microstructure import Microstructure
-from .sphere_geometry import particle_material_ids, segment_in_sphere, staircase_factor
+from ..rve.microstructure import Microstructure
+from ..rve.sphere_geometry import particle_material_ids, segment_in_sphere, staircase_factor
 
 __all__ = ["SHARES", "SurfaceCuts", "surface_cuts"]
 

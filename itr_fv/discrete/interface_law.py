@@ -1,7 +1,7 @@
 """Interface laws: how the conductance of a face follows from its geometry and the materials.
 
 Every law gives one conductance per unit area (W/(m^2 K)) per face of the 7-point stencil
-(:mod:`itr_fv.model`), so both solvers and the reduced basis take any law unchanged. A face
+(:mod:`itr_fv.discrete.model`), so both solvers and the reduced basis take any law unchanged. A face
 is a series of resistances (m^2 K/W)::
 
     r_f = sum over phases of (length in the phase) / k  +  sum over crossings of  w R
@@ -16,13 +16,15 @@ and the laws differ in how they measure the lengths and the crossings:
   segments) or ``"area"`` (the paper's per-area ``R_ff``).
 - :class:`SegmentLaw` (``"segment"``, gap contacts only): every face whose centre-to-centre
   segment meets a sphere takes its lengths from the analytic spheres along that segment and
-  one ``w R`` per surface crossing (:mod:`itr_fv.cut_cells`); the bulk parts have their exact
-  lengths at every h.
+  one ``w R`` per surface crossing (:mod:`itr_fv.discrete.cut_cells`); the bulk parts have
+  their exact lengths at every h.
 
-A law declares the parameter kinds it reads (:data:`itr_fv.parameters.KINDS` is their union)
-and how its face resistances depend on each (:attr:`InterfaceLaw.affine_in`): affine in
-``1 / k`` and in ``R`` for all the laws here, not in a contact-spot conductance ``Gc``
-(added in parallel). The reduced basis asks the law instead of assuming it.
+A law declares the parameter kinds it reads (:data:`itr_fv.materials.parameters.KINDS` is
+their union), the geometry it needs (:meth:`InterfaceLaw.labels`,
+:meth:`InterfaceLaw.law_geometry`, :attr:`InterfaceLaw.needs_particles`) and how its face
+resistances depend on each (:attr:`InterfaceLaw.affine_in`): affine in ``1 / k`` and in
+``R`` for all the laws here, not in a contact-spot conductance ``Gc`` (added in parallel).
+The reduced basis asks the law instead of assuming it.
 """
 
 from __future__ import annotations
@@ -31,9 +33,12 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-#: A :class:`itr_fv.face_geometry.FaceGeometry` and a :class:`itr_fv.materials.Materials`
-#: (not imported here: the parameter names of :mod:`itr_fv.parameters` come from this module,
-#: below both).
+from ..materials.parameters import KINDS
+from .contact_zones import fill_thin_films, zone_segments
+from .cut_cells import SHARES, surface_cuts
+
+#: A :class:`itr_fv.discrete.face_geometry.FaceGeometry` and a
+#: :class:`itr_fv.materials.Materials` (not imported here: face_geometry imports this module).
 GeometryLike = Any
 MaterialsLike = Any
 
@@ -41,8 +46,8 @@ __all__ = ["InterfaceLaw", "StaircaseLaw", "SegmentLaw", "LAW_NAMES", "SHARE_NAM
            "PARAMETER_KINDS", "interface_law"]
 
 #: Interface shares of a surface crossing under the segment law (the keys of
-#: :data:`itr_fv.cut_cells.SHARES`).
-SHARE_NAMES = ("staircase", "normal")
+#: :data:`itr_fv.discrete.cut_cells.SHARES`).
+SHARE_NAMES = tuple(SHARES)
 
 
 class InterfaceLaw:
@@ -60,8 +65,21 @@ class InterfaceLaw:
     """
 
     name: ClassVar[str]
+    #: Whether the law needs the particle table (the analytic spheres), not only labels.
+    needs_particles: ClassVar[bool] = False
     contact: str
     affine_in: dict[str, str | None]
+
+    def labels(self, ms: Any) -> tuple[np.ndarray, np.ndarray, int]:
+        """``(particle_ids, material_ids, filled)``: the labels the law's faces are read
+        from (by default the microstructure's own; ``filled`` voxels changed)."""
+        return ms.particle_ids, ms.material_ids, 0
+
+    def law_geometry(self, ms: Any, *, staircase: bool) -> dict[str, Any]:
+        """The geometry this law needs beyond the faces' labels, as fields of
+        :class:`~itr_fv.discrete.face_geometry.FaceGeometry` (asked for only where the
+        particle table is known)."""
+        return {}
 
     @property
     def parameter_kinds(self) -> tuple[str, ...]:
@@ -93,6 +111,19 @@ class StaircaseLaw(InterfaceLaw):
         self.contact = contact
         third = {"Gc": None} if contact == "gap" else {"Rff": "linear"}
         self.affine_in = {"k": "inverse", "R": "linear", **third}
+
+    def labels(self, ms: Any) -> tuple[np.ndarray, np.ndarray, int]:
+        """Under the gap model with the particle table, matrix wedges thinner than a voxel
+        between nearly touching spheres go to the spheres (:func:`fill_thin_films`)."""
+        if self.contact == "gap" and ms.particles is not None:
+            return fill_thin_films(ms)
+        return super().labels(ms)
+
+    def law_geometry(self, ms: Any, *, staircase: bool) -> dict[str, Any]:
+        """Under the gap model: the segments of the contact zones (:func:`zone_segments`)."""
+        if self.contact != "gap":
+            return {"segments": None}
+        return {"segments": zone_segments(ms, SHARES["staircase"] if staircase else None)}
 
     def conductances(self, geometry: GeometryLike, materials: MaterialsLike) -> np.ndarray:
         k, R = materials.tables(geometry.names)
@@ -170,7 +201,7 @@ class SegmentLaw(StaircaseLaw):
     ``g = 1 / (sum_i l_i / k_i + l_m / k_m + sum_c w_c R_c)`` with l_i the length of the
     centre-to-centre segment inside spheres of filler i, l_m = h - sum_i l_i, and one
     share w_c of the particle-matrix resistance R_c per crossing of a sphere surface
-    (:data:`itr_fv.cut_cells.SHARES`). A contact between two particles is the same
+    (:data:`itr_fv.discrete.cut_cells.SHARES`). A contact between two particles is the same
     formula (the film between the spheres is the matrix length of the segment), so the
     law is the gap model at contacts; contact spots add as in the staircase law. Faces that
     meet no sphere keep the staircase law of their labels (no thin films are filled).
@@ -182,12 +213,22 @@ class SegmentLaw(StaircaseLaw):
     """
 
     name = "segment"
+    needs_particles = True
 
     def __init__(self, share: str = "staircase") -> None:
         super().__init__("gap")
         if share not in SHARE_NAMES:
             raise ValueError(f"share: expected one of {SHARE_NAMES}, got {share!r}")
         self.share = share
+
+    def labels(self, ms: Any) -> tuple[np.ndarray, np.ndarray, int]:
+        """The microstructure's own labels: the segments resolve thin films themselves."""
+        return ms.particle_ids, ms.material_ids, 0
+
+    def law_geometry(self, ms: Any, *, staircase: bool) -> dict[str, Any]:
+        """The sphere-surface crossings of every face that meets a sphere
+        (:func:`surface_cuts`)."""
+        return {"segments": None, "cuts": surface_cuts(ms, self.share)}
 
     def conductances(self, geometry: GeometryLike, materials: MaterialsLike) -> np.ndarray:
         if geometry.particle_mat is not None:
@@ -221,12 +262,18 @@ def _parameter_kinds() -> dict[str, int]:
     kinds: dict[str, int] = {}
     for law in (StaircaseLaw("gap"), StaircaseLaw("area"), SegmentLaw()):
         for kind in law.parameter_kinds:
-            kinds[kind] = 1 if kind == "k" else 2  # a conductivity names one phase, the rest two
+            if kind not in KINDS:
+                raise ImportError(f"{law!r} reads the parameter kind {kind!r}, which the flat "
+                                  f"naming (itr_fv.materials.parameters.KINDS) lacks")
+            kinds[kind] = KINDS[kind]
+    if set(kinds) != set(KINDS):
+        raise ImportError(f"no interface law reads the parameter kinds "
+                          f"{sorted(set(KINDS) - set(kinds))} of the flat naming")
     return kinds
 
 
-#: Every parameter kind some law reads, and the number of phase names each takes (this is
-#: :data:`itr_fv.parameters.KINDS`).
+#: Every parameter kind some law reads, and the number of phase names each takes (equal to
+#: :data:`itr_fv.materials.parameters.KINDS`, checked here on import).
 PARAMETER_KINDS = _parameter_kinds()
 
 

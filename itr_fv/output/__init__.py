@@ -1,0 +1,1 @@
+"""Output for a reader: VTK image files, off-screen renders of fields and particles."""
