@@ -10,7 +10,7 @@ starts; an error names the key. The file::
     replicas = 2                   # RVEs per formulation (seeds seed, seed + 1, ...)
     seed = 1
     contact = "gap"                # "gap" (default) or "area" (the paper's per-area R_ff)
-    solver = "fft"                 # one of (surrogate.solver_choice):
+    solver = "fft"                 # one of (itr_fv.solvers.choice):
                                    #  "fft" (default) numba FFT-PCG on the CPU;
                                    #  "mg"  the same, multigrid-preconditioned (high
                                    #        contrast, resistive interfaces);
@@ -18,7 +18,7 @@ starts; an error names the key. The file::
                                    #        cluster gets one worker per GPU; an external
                                    #        one needs 'dask worker ADDR --resources GPU=1';
                                    #  "fv"  the pyamg finite-volume reference (slower);
-                                   #  "auto" the cheaper of fft/fv for the grid (fft);
+                                   #  "auto" gpu where a CUDA device is seen, else fft;
                                    #  or a registered backend name, e.g. "scipy_fft"
     tol = 1e-6                     # relative residual of every solve
     block_size = 8                 # parameter sets per task (one RVE geometry per task)
@@ -69,9 +69,9 @@ from itr_fv.materials.formulation_names import UnknownFormulationError, formulat
 from itr_fv.materials.paper_data import PAPER_SYSTEM, TABLE1
 from itr_fv.rve import FillerSpec, packing_limit
 from itr_fv.rve.spec import RVESpec
+from itr_fv.solvers.choice import DEFAULT_SOLVER, check_solver
 
 from . import design as designs
-from .solver_choice import check_solver
 
 __all__ = ["Campaign", "Formulation", "Task", "CampaignError", "PAPER_BASE", "nearest_solved"]
 
@@ -127,7 +127,7 @@ class Campaign:
     name: str = "campaign"
     replicas: int = 1
     contact: str = "gap"
-    solver: str = "fft"
+    solver: str = DEFAULT_SOLVER
     tol: float = 1e-6
     block_size: int = 8
     threads_per_worker: int = 1

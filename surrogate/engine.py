@@ -25,7 +25,7 @@ loses nothing. The campaign runner (:mod:`surrogate.runner`) works the same way.
 
 Which cluster can run a solver is decided in one place, :func:`open_client` and
 :func:`ready_workers`, for the engine and the campaign runner alike: a solver that needs a
-GPU (:func:`surrogate.solver_choice.worker_resources`) gets a LocalCluster of one worker per
+GPU (:func:`itr_fv.solvers.choice.worker_resources`) gets a LocalCluster of one worker per
 CUDA device, each declaring the resource ``GPU=1`` (none found: a one-line refusal), and on
 an external scheduler at least one worker must declare ``GPU`` (else a one-line refusal
 before anything is submitted; such tasks would otherwise wait forever).
@@ -55,12 +55,19 @@ from itr_fv.discrete.problem import DiscreteProblem
 from itr_fv.io import atomic_path, counted
 from itr_fv.materials import Materials
 from itr_fv.rve.microstructure import Microstructure
+from itr_fv.solvers.choice import (
+    DEFAULT_SOLVER,
+    check_solver,
+    needs_gpu,
+    solver_backend,
+    worker_resources,
+)
+from itr_fv.solvers.devices import cuda_device_count
 
-from .solver_choice import check_solver, solver_backend, worker_resources
 from .store import rve_id, tensor_columns, tensor_of
 
 __all__ = ["RVEData", "SolveRequest", "SolveResult", "SolveStore", "SolveEngine",
-           "open_client", "ready_workers", "cuda_device_count", "needs_gpu",
+           "open_client", "ready_workers",
            "worker_memory_limit", "geometry_builds", "clear_problem_cache", "solve_row"]
 
 
@@ -144,7 +151,7 @@ class SolveRequest:
     tol : float
         Relative residual of the solve.
     solver : str
-        A solver choice of :mod:`surrogate.solver_choice` (``"fft"`` by default).
+        A resolved solver choice of :mod:`itr_fv.solvers.choice` (``DEFAULT_SOLVER`` by default).
     fields : bool
         Keep theta (the reduced basis's snapshots need it).
     labels : mapping
@@ -155,13 +162,14 @@ class SolveRequest:
     parameters: Mapping[str, float]
     contact: str
     tol: float
-    solver: str = "fft"
+    solver: str = DEFAULT_SOLVER
     fields: bool = False
     labels: Mapping[str, Any] = field(default_factory=dict)
 
     @classmethod
-    def for_materials(cls, rve: RVEData, mat: Materials, tol: float, *, solver: str = "fft",
-                      fields: bool = False, **labels: Any) -> SolveRequest:
+    def for_materials(cls, rve: RVEData, mat: Materials, tol: float, *,
+                      solver: str = DEFAULT_SOLVER, fields: bool = False,
+                      **labels: Any) -> SolveRequest:
         if mat.matrix != rve.matrix:
             raise ValueError(f"mat: matrix {mat.matrix!r} differs from the RVE's {rve.matrix!r}")
         return cls(rve, dict(mat.to_parameters()), mat.contact, float(tol), check_solver(solver),
@@ -246,7 +254,7 @@ def run_request(request: SolveRequest, threads: int | None = None) -> SolveResul
     from itr_fv.solvers.driver import homogenize
 
     problem, built = cached_problem(request.rve, request.contact)
-    backend = solver_backend(request.solver, request.rve.shape, threads=threads)
+    backend = solver_backend(request.solver, threads=threads)
     t = time.perf_counter()
     with warnings.catch_warnings():
         # the per-area model is tied to its voxel on purpose; its reports say so
@@ -397,26 +405,6 @@ def worker_memory_limit(task_bytes: float) -> int:
     return int((float(task_bytes) + WORKER_BASE_BYTES) / float(pause))
 
 
-def cuda_device_count() -> int:
-    """CUDA devices this process sees: CuPy's count (else PyTorch's); 0 without either
-    library, without a driver or without a device (never raises)."""
-    try:
-        import cupy
-        return int(cupy.cuda.runtime.getDeviceCount())
-    except Exception:  # noqa: BLE001 - no CuPy, no driver or no device: all mean "none"
-        pass
-    try:
-        import torch
-        return int(torch.cuda.device_count()) if torch.cuda.is_available() else 0
-    except Exception:  # noqa: BLE001
-        return 0
-
-
-def needs_gpu(solver: str | None) -> bool:
-    """Whether a solver choice's solves ask the Dask workers for the resource ``GPU``."""
-    return bool(solver) and bool((worker_resources(solver) or {}).get("GPU"))
-
-
 def _gpu_refusal(solver: str, why: str, scheduler: str | None = None) -> str:
     start = f"'dask worker {scheduler or 'ADDRESS'} --resources GPU=1' (one per GPU)"
     if scheduler:
@@ -482,14 +470,28 @@ def open_client(workers: int | None, scheduler: str | None, *, memory_per_worker
 def _gpu_cluster(n: int, memory_per_worker: int):
     """A local cluster of ``n`` worker processes, worker i seeing only the i-th CUDA device
     (``CUDA_VISIBLE_DEVICES``, within any the command itself was limited to) and declaring
-    the resource ``GPU=1``: one solve per device at a time, every device used."""
-    from dask.distributed import Nanny, Scheduler, SpecCluster
-
+    the resource ``GPU=1``: one solve per device at a time, every device used. Where
+    dask-cuda is installed its ``LocalCUDACluster`` starts them (it also pins each worker
+    to the CPU cores and network nearest its GPU); else a SpecCluster of plain workers."""
     visible = [d.strip() for d in os.environ.get("CUDA_VISIBLE_DEVICES", "").split(",")
                if d.strip()] or [str(i) for i in range(n)]
+    try:
+        from dask_cuda import LocalCUDACluster
+    except ImportError:
+        return _spec_gpu_cluster(visible[:n], memory_per_worker)
+    return LocalCUDACluster(CUDA_VISIBLE_DEVICES=",".join(visible[:n]), n_workers=n,
+                            threads_per_worker=1, memory_limit=memory_per_worker,
+                            resources={"GPU": 1}, dashboard_address=None,
+                            silence_logs=logging.ERROR)
+
+
+def _spec_gpu_cluster(devices: Sequence[str], memory_per_worker: int):
+    """One plain Dask worker per CUDA device in ``devices``, each seeing only its own."""
+    from dask.distributed import Nanny, Scheduler, SpecCluster
+
     workers = {f"gpu-{i}": {"cls": Nanny, "options": {
         "nthreads": 1, "memory_limit": memory_per_worker, "resources": {"GPU": 1},
-        "env": {"CUDA_VISIBLE_DEVICES": visible[i]}}} for i in range(n)}
+        "env": {"CUDA_VISIBLE_DEVICES": device}}} for i, device in enumerate(devices)}
     return SpecCluster(workers=workers, silence_logs=logging.ERROR,
                        scheduler={"cls": Scheduler, "options": {"dashboard_address": None}})
 

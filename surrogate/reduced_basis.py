@@ -47,6 +47,7 @@ from itr_fv.discrete.problem import DiscreteProblem
 from itr_fv.io import atomic_path
 from itr_fv.materials import Materials
 from itr_fv.rve.microstructure import Microstructure
+from itr_fv.solvers.choice import DEFAULT_SOLVER, check_solver, solver_backend
 
 from .face_decomposition import (
     ConductanceInterpolation,
@@ -55,7 +56,6 @@ from .face_decomposition import (
     interpolation_coefficients,
 )
 from .reduced_kernels import galerkin_tensors
-from .solver_choice import check_solver, solver_backend
 
 __all__ = ["ReducedBasis", "ReducedBasisWarning"]
 
@@ -137,7 +137,7 @@ class ReducedBasis:
         Seed of the training and check sets.
     solver : str
         Full solver of the snapshots: ``"fft"``, ``"fv"``, ``"auto"`` or a backend name
-        (:mod:`surrogate.solver_choice`).
+        (:mod:`itr_fv.solvers.choice`).
     solver_tol : float
         Relative residual of the full solves.
     interpolation_tol : float, optional
@@ -178,7 +178,8 @@ class ReducedBasis:
 
     def __init__(self, ms: Microstructure | DiscreteProblem, materials: Materials,
                  bounds: Mapping[str, tuple[float, float]], *, tol: float = 1e-3,
-                 max_solves: int = 40, n_train: int = 256, seed: int = 0, solver: str = "fft",
+                 max_solves: int = 40, n_train: int = 256, seed: int = 0,
+                 solver: str = DEFAULT_SOLVER,
                  solver_tol: float = 1e-9, interpolation_tol: float | None = None,
                  max_interpolation_terms: int = 120, progress: bool = False) -> None:
         self.ms = ms
@@ -312,7 +313,7 @@ class ReducedBasis:
         from itr_fv.solvers.driver import homogenize
 
         def solve(problem, mat):
-            backend = solver_backend(self.solver, problem.shape)
+            backend = solver_backend(self.solver)
             return homogenize(problem, mat, backend=backend, tol=self.solver_tol)
         return solve
 

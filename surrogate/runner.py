@@ -51,9 +51,9 @@ class RunSummary:
 
 
 def _backend(camp: Campaign):
-    """The campaign's solver backend (chosen in :mod:`surrogate.solver_choice`)."""
-    from .solver_choice import solver_backend
-    return solver_backend(camp.solver, camp.shape, threads=camp.threads_per_worker)
+    """The campaign's solver backend (chosen in :mod:`itr_fv.solvers.choice`)."""
+    from itr_fv.solvers.choice import solver_backend
+    return solver_backend(camp.solver, threads=camp.threads_per_worker)
 
 
 def campaign_rve(camp: Campaign, formulation: str, replica: int) -> PackedRVE:
@@ -144,14 +144,14 @@ def worker_memory(camp: Campaign) -> int:
     """Memory limit of a worker, bytes: the solver's peak estimate with the fields kept plus
     the warm-start fields of a block, sized by :func:`surrogate.engine.worker_memory_limit`
     (interpreter and allocator slack added, peak kept at dask's pause mark)."""
+    from itr_fv.solvers.choice import needs_gpu, solver_choice
     from itr_fv.solvers.resources import estimate_peak_memory
 
-    from .engine import needs_gpu, worker_memory_limit
-    from .solver_choice import SOLVER_CHOICES
+    from .engine import worker_memory_limit
 
     # a GPU solver's backend is sized by name: the client that sizes the workers may have no
     # GPU (its workers do), and a GPU worker's host memory is at most the CPU run's
-    backend = SOLVER_CHOICES[camp.solver][0] if needs_gpu(camp.solver) else _backend(camp)
+    backend = solver_choice(camp.solver).backend if needs_gpu(camp.solver) else _backend(camp)
     peak = estimate_peak_memory(camp.shape, backend, store_fields=True)
     fields = 3 * 8 * int(np.prod(camp.shape)) * camp.block_size
     return worker_memory_limit(peak + fields)
@@ -246,7 +246,7 @@ def _execute(client, campaign: Campaign, todo: list[Task], store: CampaignStore,
     from dask.distributed import as_completed
     from tqdm import tqdm
 
-    from .solver_choice import worker_resources
+    from itr_fv.solvers.choice import worker_resources
 
     spec = campaign.to_dict()
     prefix = f"itr-{campaign.fingerprint()[:8]}-"

@@ -15,7 +15,7 @@ import pytest
 import itr_fft
 from itr_fft.array_api_backend import ArrayAPIBackend, _cuda_available, resolve_device
 from itr_fv.solvers.driver import homogenize
-from itr_surrogate.solver_choice import solver_backend, worker_resources
+from itr_fv.solvers.choice import solver_backend, worker_resources
 from validation.gallery import build, rve_cases
 
 CASES = [c.name for c in rve_cases()]
@@ -78,7 +78,7 @@ def test_device_choices_are_checked():
 def test_solver_choices_for_the_campaign_engine():
     assert worker_resources("gpu") == {"GPU": 1}
     assert worker_resources("fft") is None and worker_resources("mg") is None
-    mg = solver_backend("mg", (64, 64, 64), threads=1)
+    mg = solver_backend("mg", threads=1)
     assert mg.name == "itr_fft" and mg.preconditioner == "multigrid" and mg.workers == 1
     with pytest.raises(ValueError, match="solver"):
         worker_resources("quantum")

@@ -257,7 +257,7 @@ def test_a_gpu_solver_is_refused_before_submitting_when_no_worker_declares_a_gpu
     assert "solver 'gpu'" in err and f"dask worker {address} --resources GPU=1" in err
     assert not Path("g").exists()  # refused before the folder, before any task
     # on a local cluster (no GPU here): the same one line, nothing started
-    from itr_surrogate.engine import cuda_device_count
+    from itr_fv.solvers.devices import cuda_device_count
 
     if cuda_device_count() == 0:
         code, out, err = itr_main(capsys, "campaign", "run", "gpu.toml", "--out", "g",

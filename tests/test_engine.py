@@ -133,7 +133,7 @@ def test_gpu_solves_go_only_to_workers_that_declare_a_gpu(rves):
     with no GPU in the machine, to the array-API backend's own clear error)."""
     from dask.distributed import Client, LocalCluster
 
-    from itr_surrogate.solver_choice import worker_resources
+    from itr_fv.solvers.choice import worker_resources
 
     req = SolveRequest.for_materials(rves[0][1], MAT, 1e-8, solver="gpu")
     with LocalCluster(n_workers=1, threads_per_worker=1, processes=False,

@@ -186,16 +186,6 @@ def test_homogeneous_medium_needs_no_iteration(fft_solve):
     assert np.allclose(res.k_eff, 0.18 * np.eye(3), rtol=1e-14)
 
 
-def test_choose_solver():
-    from itr_surrogate.solver_choice import choose_solver, homogenize_auto
-
-    assert choose_solver((256, 256, 256)) == "itr_fft"
-    assert choose_solver(8) in ("itr_fv", "itr_fft")
-    ms, mat = build("sc_R0", 16)
-    res = homogenize_auto(ms, mat, tol=1e-8)
-    assert res.converged and res.solver == choose_solver(ms.shape)
-
-
 @pytest.mark.parametrize("shape", [(6, 8, 10), (7, 5, 9)])
 def test_the_spectral_inverse_inverts_the_constant_coefficient_operator(shape):
     """``itr_fft.spectral.inverse_laplacian`` (the one symbol every FFT preconditioner uses)

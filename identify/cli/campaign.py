@@ -8,9 +8,10 @@ while running.
 from __future__ import annotations
 
 import argparse
+from dataclasses import replace
 from pathlib import Path
 
-from .core import CLIError, Parser, number, open_campaign
+from .core import CLIError, Parser, number, open_campaign, solver_arguments, solver_option
 
 __all__ = ["add_parser"]
 
@@ -23,6 +24,9 @@ def _run(args: argparse.Namespace) -> int:
         camp = Campaign.from_toml(args.file)
     except CampaignError as exc:
         raise CLIError(str(exc), 2) from None
+    solver = solver_option(args, camp.solver)
+    if solver != camp.solver:
+        camp = replace(camp, solver=solver)
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise CLIError(f"--out: {args.out!r} is a file, not a folder", 2)
@@ -66,6 +70,7 @@ def add_parser(sub) -> None:
                      help="workers of the local Dask cluster (default: cores, at most 4)")
     run.add_argument("--scheduler", default=None,
                      help="address of a running Dask scheduler, e.g. tcp://host:8786")
+    solver_arguments(run)
     run.add_argument("--no-progress", action="store_true", help="no progress bar")
     run.set_defaults(func=_run)
     status = actions.add_parser("status", help="done / total and failures of a campaign")

@@ -24,7 +24,7 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 
 __all__ = ["CLIError", "Parser", "number", "FLAG_NAMES", "flagged", "output_folder",
-           "engine_arguments", "engine_options",
+           "engine_arguments", "engine_options", "solver_arguments", "solver_option",
            "open_campaign", "rve_arguments", "forward_settings", "read_table",
            "identification_arguments", "reproduce_settings"]
 
@@ -182,12 +182,15 @@ def rve_arguments(p: argparse.ArgumentParser, *, box: str, voxel: str) -> None:
 
 def forward_settings(fw, args: argparse.Namespace):
     """``fw`` (a ForwardSettings) with the command line's --box-um, --voxel-um, --replicas,
-    --seed, --film-nm, --psd-basis; a bad value is a CLIError naming the flag."""
+    --seed, --film-nm, --psd-basis, --solver and --device; a bad value is a CLIError naming
+    the flag."""
     film = getattr(args, "film_nm", None)
+    solver = solver_option(args, fw.solver) if hasattr(args, "solver") else None
     changes = {k: v for k, v in (("box_um", args.box_um), ("voxel_um", args.voxel_um),
                                  ("replicas", args.replicas), ("seed", args.seed),
                                  ("min_gap_um", None if film is None else film / 1000),
-                                 ("psd_basis", getattr(args, "psd_basis", None)))
+                                 ("psd_basis", getattr(args, "psd_basis", None)),
+                                 ("solver", solver))
                if v is not None}
     try:
         return fw.with_(**changes)
@@ -216,9 +219,47 @@ def read_table(path: str | None, reader: Callable):
                                            else msg), 2) from None
 
 
+def solver_arguments(p: argparse.ArgumentParser, *, default: str | None = None) -> None:
+    """--solver NAME and --device cpu|cuda|auto: what solves and where (read by
+    :func:`solver_option`). ``default`` None: the solver is taken from elsewhere (a
+    campaign file) unless given."""
+    from itr_fv.solvers.choice import DEFAULT_DEVICE, DEVICES, SOLVERS
+
+    names = ", ".join(f"{n} ({c.summary})" for n, c in SOLVERS.items())
+    p.add_argument("--solver", default=default, metavar="NAME",
+                   help=f"the full solver: {names}, auto (gpu on a CUDA device, else fft), "
+                   "or a registered backend name"
+                   + (f" (default {default})" if default else " (default: the file's)"))
+    p.add_argument("--device", choices=DEVICES, default=None,
+                   help="where to solve: cpu, cuda (refused at once without a CUDA device) "
+                   "or auto (a CUDA device where one is seen) (default: the solver's, "
+                   f"{DEFAULT_DEVICE} but for gpu); fft on cuda is the gpu solver")
+
+
+def solver_option(args: argparse.Namespace, solver: str | None = None) -> str:
+    """The resolved solver choice of --solver (else ``solver``) and --device; a CLIError
+    (status 2) naming the flag when they do not go together or no CUDA device is seen.
+    With --scheduler the device is the workers' business: ``cuda`` is not checked here
+    (the engine refuses before submitting when no worker declares a GPU)."""
+    from itr_fv.solvers.choice import resolve_solver
+
+    name = getattr(args, "solver", None) or solver
+    device = getattr(args, "device", None)
+    try:
+        return resolve_solver(name, device, solver_argument="--solver",
+                              device_argument="--device",
+                              local=not getattr(args, "scheduler", None))
+    except ValueError as exc:
+        raise CLIError(str(exc), 2) from None
+
+
 def engine_arguments(p: argparse.ArgumentParser) -> None:
     """--workers N and --scheduler ADDRESS: where the full solves run; --store DIR: where
-    they are kept (read by :func:`engine_options`)."""
+    they are kept (read by :func:`engine_options`); --solver and --device: what solves
+    (:func:`solver_arguments`)."""
+    from itr_fv.solvers.choice import DEFAULT_SOLVER
+
+    solver_arguments(p, default=DEFAULT_SOLVER)
     p.add_argument("--workers", type=number(int, 1, 64, hi_open=False), default=None,
                    help="run the full solves on a local Dask cluster of N processes "
                    "(default: in this process, the fastest on 2 cores)")

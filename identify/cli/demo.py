@@ -4,7 +4,9 @@ from __future__ import annotations
 
 import argparse
 
-from .core import CLIError, number, output_folder
+from itr_fv.solvers.choice import DEFAULT_SOLVER
+
+from .core import CLIError, number, output_folder, solver_arguments, solver_option
 
 __all__ = ["add_parser"]
 
@@ -16,7 +18,7 @@ def _run(args: argparse.Namespace) -> int:
 
     voxel = args.box_um / args.n if args.n is not None else args.voxel_um
     settings = DemoSettings(rve=RVESpec(box_um=args.box_um, voxel_um=voxel, seed=args.seed),
-                            fraction=args.fraction, solver=args.solver, tol=args.tol)
+                            fraction=args.fraction, solver=solver_option(args), tol=args.tol)
     with output_folder(args.out) as out:
         try:
             run_demo(settings, out)
@@ -44,8 +46,7 @@ def add_parser(sub) -> None:
                       default=0.55, help="Al2O3 volume fraction (default 0.55)")
     demo.add_argument("--seed", type=number(int, 0, None, lo_open=False), default=1,
                       help="random seed, >= 0 (default 1)")
-    demo.add_argument("--solver", choices=["fft", "fv"], default="fft",
-                      help="fft (default) or the fv reference")
+    solver_arguments(demo, default=DEFAULT_SOLVER)
     demo.add_argument("--tol", type=number(float, 1e-12, 1, lo_open=False), default=1e-8,
                       help="relative residual, in [1e-12, 1) (default 1e-8)")
     demo.add_argument("--out", default="itr-demo", help="output folder (default itr-demo)")

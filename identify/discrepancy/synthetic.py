@@ -82,7 +82,7 @@ def synthetic_measurements(formulations: Sequence[str], resistances: dict[str, f
                 for e, v in ([(effect, value)] if effect is not None else []) + list(extra):
                     ms = e.microstructure(ms, v, seed=rve_seed + r)
                     m = e.materials_in(ms, m, v)
-                ks.append(full_solve(ms, m, s.solver_tol).mean())
+                ks.append(full_solve(ms, m, s.solver_tol, solver=s.solver).mean())
             k = float(np.mean(ks))
             t = (np.resize(np.asarray(thickness_mm, dtype=float), replicates) * 1e-3
                  if thickness_mm is not None else None)

@@ -131,7 +131,7 @@ def build_tables(fractions: dict[str, dict[str, float]], *,
                                         lambda v, e=e, theta=theta: e.materials_in(
                                             ms0, model.materials(v), theta)))
             requests = [SolveRequest.for_materials(
-                RVEData.of(ms), materials_at({r_name: R}), s.solver_tol,
+                RVEData.of(ms), materials_at({r_name: R}), s.solver_tol, solver=s.solver,
                 purpose="discrepancy table", formulation=f, effect=name,
                 effect_value=theta) for name, theta, ms, materials_at in columns for R in grid]
             results = engine.solve(requests, tick=tick)

@@ -36,6 +36,7 @@ from itr_fv.materials import paper_data
 from itr_fv.materials.parameters import parameter_name
 from itr_fv.rve import FillerSpec, build_rve
 from itr_fv.rve.spec import RVESpec
+from itr_fv.solvers.choice import DEFAULT_SOLVER, check_solver
 from itr_surrogate.engine import (
     RVEData,
     SolveEngine,
@@ -131,7 +132,10 @@ class ForwardSettings:
     rb_max_solves : int
         Full solves per reduced basis at most.
     solver_tol : float
-        Relative residual of every full solve (itr_fft).
+        Relative residual of every full solve.
+    solver : str
+        The resolved solver choice of every full solve (:func:`itr_fv.solvers.choice.
+        resolve_solver`: ``"fft"`` by default, ``"gpu"`` on a CUDA device, ``"mg"``, ...).
     psd_basis : {"number", "volume"}
         Weighting of Table 1's lognormal (mu, sigma): ``"number"`` (default; the paper's
         Table 1 reads as number-weighted, E[D] = exp(mu + sigma^2 / 2) matches its mean
@@ -150,6 +154,7 @@ class ForwardSettings:
     rb_tol: float = 2e-3
     rb_max_solves: int = 30
     solver_tol: float = 1e-8
+    solver: str = DEFAULT_SOLVER
     psd_basis: str = "number"
     faithful: FaithfulRVE | None = None
 
@@ -162,6 +167,7 @@ class ForwardSettings:
                              f"{self.psd_basis!r}")
         if not isinstance(self.rve, RVESpec):
             raise ValueError(f"rve: expected an RVESpec, got {type(self.rve).__name__}")
+        check_solver(self.solver)
         if not isinstance(self.replicas, int) or self.replicas < 2:
             raise ValueError(f"replicas: expected a whole number >= 2 (the RVE scatter needs "
                              f"two), got {self.replicas!r}")
@@ -201,16 +207,18 @@ def _specs(fractions: Mapping[str, float], basis: str = "number") -> list[Filler
 
 
 def full_solve(ms, materials: Materials, tol: float, *, engine: SolveEngine | None = None,
-               **labels) -> np.ndarray:
+               solver: str = DEFAULT_SOLVER, **labels) -> np.ndarray:
     """Diagonal of k_eff (3,), W/(m K), of ``ms`` (a packed Microstructure, or its
     :class:`~itr_fv.discrete.problem.DiscreteProblem`) by a full solve on the solve engine
     (:mod:`itr_surrogate.engine`; default: this process, no store). The engine keeps one
     discrete problem per RVE, so many solves of one RVE build its geometry once; the
     per-area contact model's VoxelContactWarning is silenced there (that parametrisation is
-    tied to its voxel on purpose; the report says so). ``labels`` go with the stored row."""
+    tied to its voxel on purpose; the report says so). ``solver`` is a resolved choice of
+    :mod:`itr_fv.solvers.choice`; ``labels`` go with the stored row."""
     if isinstance(ms, DiscreteProblem):
         ms = ms.microstructure
-    request = SolveRequest.for_materials(RVEData.of(ms), materials, tol, **labels)
+    request = SolveRequest.for_materials(RVEData.of(ms), materials, tol, solver=solver,
+                                         **labels)
     return (engine or _SERIAL).solve_one(request).k_diagonal
 
 
@@ -300,7 +308,7 @@ class ForwardModel:
                 warnings.simplefilter("ignore")  # VoxelContactWarning: the area model
                 self.rb = ReducedBasis(problem, mat, bounds, tol=s.rb_tol,
                                        max_solves=s.rb_max_solves, solver_tol=s.solver_tol,
-                                       seed=s.seed, progress=progress)
+                                       solver=s.solver, seed=s.seed, progress=progress)
                 self.rb.fit(full_solve=lambda _problem, m: self._solve_recorded(
                     [self._request(0, m, purpose="reduced basis", fields=True)])[0])
         ks = self._solve_all(self.centre, purpose="RVE scatter")
@@ -439,7 +447,8 @@ class ForwardModel:
         for j, (rve, _) in enumerate(self.faithful_rves):
             for grid, label in ((rve, "fine"), (replace(rve, shape=coarse), "coarse")):
                 requests.append(SolveRequest.for_materials(
-                    grid, mat, self.settings.solver_tol, purpose=f"faithful {label}",
+                    grid, mat, self.settings.solver_tol, solver=self.settings.solver,
+                    purpose=f"faithful {label}",
                     formulation=self.formulation, replica=faithful.seed + j))
         with _local_work():
             results = self._solve_recorded(requests, tick=tick)
@@ -492,7 +501,8 @@ class ForwardModel:
                  fields: bool = False) -> SolveRequest:
         return SolveRequest.for_materials(
             RVEData.of(self.microstructures[replica]), mat, self.settings.solver_tol,
-            fields=fields, purpose=purpose, formulation=self.formulation, replica=replica)
+            solver=self.settings.solver, fields=fields, purpose=purpose,
+            formulation=self.formulation, replica=replica)
 
     def _solve_all(self, values: Mapping[str, float], *, purpose: str,
                    tick: Callable[[], None] | None = None) -> np.ndarray:

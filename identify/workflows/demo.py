@@ -27,7 +27,7 @@ import numpy as np
 
 from itr_fv.materials import paper_data
 from itr_fv.rve.spec import RVESpec
-from itr_surrogate.solver_choice import check_solver
+from itr_fv.solvers.choice import DEFAULT_SOLVER, check_solver
 
 __all__ = ["DemoSettings", "run_demo", "PAPER_R", "VOXEL_BIAS", "DEMO_SCATTER"]
 
@@ -62,14 +62,14 @@ class DemoSettings:
     fraction : float
         Al2O3 volume fraction.
     solver : str
-        ``"fft"`` or ``"fv"`` (or any choice of :mod:`itr_surrogate.solver_choice`).
+        A resolved solver choice of :mod:`itr_fv.solvers.choice` (``"fft"``, ``"gpu"``, ...).
     tol : float
         Relative residual of the solve.
     """
 
     rve: RVESpec = RVESpec(box_um=16.0, voxel_um=0.16)
     fraction: float = 0.55
-    solver: str = "fft"
+    solver: str = DEFAULT_SOLVER
     tol: float = 1e-8
 
     def __post_init__(self) -> None:
@@ -134,8 +134,8 @@ def run_demo(settings: DemoSettings, out: Path, echo=print) -> list[Path]:
     from itr_fv import Materials
     from itr_fv.io import begin_run, write_manifest, write_text
     from itr_fv.rve import FillerSpec, build_rve
+    from itr_fv.solvers.choice import solver_backend
     from itr_fv.solvers.driver import homogenize
-    from itr_surrogate.solver_choice import solver_backend
 
     begin_run(out)
     t0 = time.perf_counter()
@@ -150,7 +150,7 @@ def run_demo(settings: DemoSettings, out: Path, echo=print) -> list[Path]:
     mat = Materials(paper_data.PAPER_SYSTEM.conductivities(["Al2O3"]),
                     {("Al2O3", matrix): PAPER_R[("Al2O3", matrix)]}, matrix=matrix,
                     contact="gap")
-    res = homogenize(ms, mat, backend=solver_backend(settings.solver, ms.shape),
+    res = homogenize(ms, mat, backend=solver_backend(settings.solver),
                      tol=settings.tol)
     echo(res.summary())
     k_iso = float(np.trace(res.k_eff) / 3.0)

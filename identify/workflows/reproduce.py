@@ -95,16 +95,16 @@ def write_solves(idents: Sequence[Identification], path: Path) -> Path:
 def _temperature_field(ident: Identification, formulation: str, out: Path) -> list[Path]:
     """Full solve with fields of the first replica at the best values: .vti and a render
     (on this process's cached problem of that RVE: its geometry is not built again)."""
+    from itr_fv.solvers.choice import solver_backend
     from itr_fv.solvers.driver import homogenize
     from itr_surrogate.engine import RVEData, cached_problem
-    from itr_surrogate.solver_choice import solver_backend
 
     m = ident.models[formulation]
     mat = m.materials({p: ident.posterior.best[p] for p in m.parameters})
     problem = cached_problem(RVEData.of(m.microstructures[0]), mat.contact)[0]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        res = homogenize(problem, mat, backend=solver_backend("fft", problem.shape),
+        res = homogenize(problem, mat, backend=solver_backend(ident.settings.solver),
                          tol=ident.settings.solver_tol, directions=(0,))
     stem = f"temperature_{formulation}_{ident.parametrisation}"
     vti = res.to_vtk(out / f"{stem}.vti", load_cases=[0], vectors=False)

@@ -106,7 +106,13 @@ class Backend(ABC):
 
     @abstractmethod
     def bytes_per_voxel(self) -> int:
-        """Measured peak memory of a solve per voxel, bytes (fields not kept)."""
+        """Measured peak host memory of a solve per voxel, bytes (fields not kept)."""
+
+    def device_bytes_per_voxel(self) -> int:
+        """Peak memory per voxel a solve holds on an accelerator, bytes (0: its arrays live
+        on the host, all counted by :meth:`bytes_per_voxel`). The memory guard compares it
+        with the device's free memory (:func:`itr_fv.solvers.resources.check_memory`)."""
+        return 0
 
     def check(self, shape: tuple[int, int, int], tol: float) -> None:
         """Refuse options that cannot work on this grid at this tolerance (ValueError)."""

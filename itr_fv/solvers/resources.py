@@ -7,8 +7,11 @@ backend states its measured peak bytes per voxel
 fresh interpreter, dense 60 % Al2O3 RVE, three load cases, store_fields=False;
 ``validation/results/memory.md``, written by ``validation/bench_memory.py``), plus
 ``FIELD_BYTES_PER_VOXEL_CASE`` per load case when the fields are kept
-(``store_fields=True``: theta, temperature and three face fluxes in float64). This module
-knows no backend by name: it asks the registry.
+(``store_fields=True``: theta, temperature and three face fluxes in float64). A backend
+whose arrays live on an accelerator also states its bytes per voxel there
+(:meth:`~itr_fv.solvers.backends.Backend.device_bytes_per_voxel`), checked against the
+device's free memory (:func:`check_device_memory`), not the host's. This module knows no
+backend by name: it asks the registry.
 """
 
 from __future__ import annotations
@@ -22,7 +25,7 @@ if TYPE_CHECKING:  # pragma: no cover
     from .backends import Backend
 
 __all__ = ["InsufficientMemoryError", "available_memory", "estimate_peak_memory",
-           "check_memory", "FIELD_BYTES_PER_VOXEL_CASE"]
+           "check_memory", "check_device_memory", "FIELD_BYTES_PER_VOXEL_CASE"]
 
 #: theta + temperature (8 B each) and three face fluxes (24 B) per load case, plus the
 #: temporaries of the flux computation.
@@ -136,6 +139,49 @@ def estimate_peak_memory(shape: Sequence[int], solver: "str | Backend", *,
     return int(n * per)
 
 
+def check_device_memory(shape: Sequence[int], backend: "Backend", *,
+                        free: int | None = None) -> int:
+    """Refuse a solve whose arrays on the accelerator exceed its free memory.
+
+    Parameters
+    ----------
+    shape : (n1, n2, n3)
+        Voxel grid.
+    backend : Backend
+        A configured backend; its :meth:`~itr_fv.solvers.backends.Backend.
+        device_bytes_per_voxel` is the cost (0: nothing on a device, nothing checked).
+    free : int, optional
+        Free device bytes (default: :func:`itr_fv.solvers.devices.cuda_free_memory`).
+
+    Returns
+    -------
+    int
+        The estimate on the device, bytes (0 for a host backend).
+
+    Raises
+    ------
+    InsufficientMemoryError
+        One line with the estimate, the free device memory and what would fit.
+    """
+    per = int(backend.device_bytes_per_voxel())
+    if per <= 0:
+        return 0
+    from .devices import cuda_free_memory
+
+    n = math.prod(int(s) for s in shape)
+    est = n * per
+    free = cuda_free_memory() if free is None else int(free)
+    if free is None or est <= HEADROOM * free:
+        return est
+    grid = "x".join(str(int(s)) for s in shape)
+    fits = int((HEADROOM * free / per) ** (1.0 / 3.0))
+    raise InsufficientMemoryError(
+        f"memory: {backend.name} on a {grid} grid needs ~{_gb(est)} of GPU memory but "
+        f"{_gb(free)} is free on the device; a grid of at most ~{fits}^3 fits (or "
+        "dtype=float32 where the tolerance allows); pass check_memory=False to try anyway",
+        est, free)
+
+
 def _gb(b: float) -> str:
     return f"{b / 1e9:.1f} GB"
 
@@ -166,6 +212,7 @@ def check_memory(shape: Sequence[int], solver: "str | Backend", *, dtype: str | 
     from .backends import available_backends, backend_for
 
     chosen = _backend(solver, dtype)
+    check_device_memory(shape, chosen)
     est = estimate_peak_memory(shape, chosen, store_fields=store_fields, load_cases=load_cases)
     avail = available_memory() if available is None else int(available)
     if avail is None or est <= HEADROOM * avail:
