@@ -60,6 +60,8 @@ from itr_fv.solvers.choice import (
     check_solver,
     needs_gpu,
     solver_backend,
+    solver_choice,
+    solvers_for,
     worker_resources,
 )
 from itr_fv.solvers.devices import cuda_device_count
@@ -407,11 +409,12 @@ def worker_memory_limit(task_bytes: float) -> int:
 
 def _gpu_refusal(solver: str, why: str, scheduler: str | None = None) -> str:
     start = f"'dask worker {scheduler or 'ADDRESS'} --resources GPU=1' (one per GPU)"
+    others = " or ".join(map(repr, solvers_for("cpu")[:2]))
     if scheduler:
         return (f"solver {solver!r} solves on a GPU, but {why}; start GPU workers with "
-                f"{start}, or choose another solver (e.g. 'fft' or 'mg')")
+                f"{start}, or choose another solver (e.g. {others})")
     return (f"solver {solver!r} solves on a GPU, but {why}; choose another solver (e.g. "
-            f"'fft' or 'mg'), or use --scheduler with GPU workers started as {start}")
+            f"{others}), or use --scheduler with GPU workers started as {start}")
 
 
 def open_client(workers: int | None, scheduler: str | None, *, memory_per_worker: int,
@@ -578,8 +581,11 @@ class SolveEngine:
         with self._lock:
             if self._client is None:
                 from itr_fv.solvers.resources import estimate_peak_memory
+
+                # sized by the backend's name: the client may have no GPU (its workers do)
+                backend = solver_choice(solver or DEFAULT_SOLVER).backend
                 need = worker_memory_limit(
-                    estimate_peak_memory(shape, "itr_fft", store_fields=True))
+                    estimate_peak_memory(shape, backend, store_fields=True))
                 self._client, self._cluster = open_client(
                     self.workers, self.scheduler, memory_per_worker=need, echo=self.echo,
                     solver=solver)

@@ -1,6 +1,6 @@
 """Validation of identified resistances: full-solver predictions and leave-one-out.
 
-- :func:`validate`: every formulation solved with the full solver (itr_fft) on each RVE
+- :func:`validate`: every formulation solved with the full solver (the settings' choice) on each RVE
   replica in three directions at the identified values; the mean of the replicas x
   directions is the prediction, their spread its RVE scatter; next to the measured mean and
   the paper's Table 6.

@@ -10,6 +10,7 @@ import numpy as np
 from itr_fv.materials import paper_data
 from itr_fv.materials.parameters import parse_parameter
 from itr_fv.rve.spec import SEED_STRIDE
+from itr_fv.solvers.choice import solver_choice
 
 from ..inference.measurements import Measurements
 from ..inference.pipeline import Identification
@@ -299,7 +300,9 @@ def settings_lines(idents: Mapping[str, Identification], extra: Mapping[str, obj
              f"- prior: log-uniform {s.prior_m2K_per_W[0]:g} - {s.prior_m2K_per_W[1]:g} "
              "m^2 K/W for every resistance; screening grid 1e-8 - 1e-5 (the paper's)",
              f"- reduced basis: relative bound gap {s.rb_tol:g}, at most {s.rb_max_solves} "
-             f"full solves; full solves itr_fft at relative residual {s.solver_tol:g}"]
+             f"full solves; full solves by the solver {s.solver!r} "
+             f"({solver_choice(s.solver).summary or s.solver}) at relative residual "
+             f"{s.solver_tol:g}"]
     for par, i in idents.items():
         c = next(iter(i.models.values())).parametrisation
         lines.append(f"- parametrisation {par}: {c.description}")

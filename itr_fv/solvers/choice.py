@@ -35,7 +35,7 @@ from .backends import Backend, available_backends, backend_for
 from .devices import cuda_device_count, require_cuda
 
 __all__ = ["SolverChoice", "SOLVERS", "DEFAULT_SOLVER", "DEFAULT_DEVICE", "DEVICES",
-           "check_solver", "resolve_solver", "solver_choice", "solver_backend",
+           "check_solver", "resolve_solver", "solver_choice", "solver_backend", "solvers_for",
            "worker_resources", "needs_gpu"]
 
 #: Where a solve may run.
