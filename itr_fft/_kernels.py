@@ -244,32 +244,6 @@ def project_clusters(v: np.ndarray, labels_flat: np.ndarray, counts: np.ndarray)
 
 
 @njit(**_SER)
-def _row_log_sum(g, i, out):  # pragma: no cover - compiled
-    """Sum of log g and count of g > 0 over row i of all three face sets, into out[i, :]."""
-    loc = 0.0
-    c = 0
-    for d in range(3):
-        for j in range(g.shape[2]):
-            for k in range(g.shape[3]):
-                v = g[d, i, j, k]
-                if v > 0.0:
-                    loc += np.log(v)
-                    c += 1
-    out[i, 0] = loc
-    out[i, 1] = c
-
-
-@njit(**_PAR)
-def log_sum_positive(g):  # pragma: no cover - compiled
-    """(sum of log g over faces with g > 0, their count); g of shape (3, n1, n2, n3)."""
-    n1 = g.shape[1]
-    part = np.zeros((n1, 2))
-    for i in nb.prange(n1):
-        _row_log_sum(g, i, part)
-    return part[:, 0].sum(), int(part[:, 1].sum())
-
-
-@njit(**_SER)
 def _row_residual(g0, g1, g2, gd, x, d, hE, i, im, ip):  # pragma: no cover - compiled
     n2, n3 = x.shape[1], x.shape[2]
     loc = 0.0

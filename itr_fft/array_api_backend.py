@@ -1,21 +1,27 @@
 """The backend ``"array_api"``: the FFT-preconditioned CG written once against the array API.
 
-The operator (the 7-point face-conductance stencil of :mod:`itr_fv.discrete.model`), the
-preconditioner (the exact inverse of the constant-coefficient periodic Laplacian with face
-conductance ``g_ref``, applied with real FFTs) and the cluster projection use only functions
-of the Python array API standard (``roll``, ``fft.rfftn``/``irfftn``, ``take``,
-``cumulative_sum``, arithmetic, in-place updates), and CG is
-:func:`itr_fv.solvers.krylov.conjugate_gradients` with :class:`ArrayAPIOps`. So NumPy, CuPy and
-PyTorch arrays run the same lines, on the CPU or a GPU; ``array-api-strict`` (the
-standard's reference implementation) runs them in the tests, which proves nothing outside
-the standard is used.
+The operator is :func:`itr_fv.discrete.operator.apply_operator` (the one 7-point
+face-conductance stencil in array code) and the cluster projection
+:class:`itr_fv.discrete.connectivity.ClusterProjection`; the preconditioner (the exact inverse
+of the constant-coefficient periodic Laplacian with face conductance ``g_ref``, symbol from
+:mod:`itr_fft.spectral`, applied with real FFTs) uses only ``fft.rfftn``/``irfftn``, ``astype``
+and arithmetic; CG is :func:`itr_fv.solvers.krylov.conjugate_gradients` with
+:class:`ArrayAPIOps`. So NumPy, CuPy and PyTorch arrays run the same lines, on the CPU or a
+GPU; ``array-api-strict`` (the standard's reference implementation) runs them in the tests,
+which proves nothing outside the standard is used.
 
 Everything that happens once per system (the reference conductance, the Laplacian symbol,
-the cluster ordering) is computed on the host with NumPy and moved to the device; the
-face conductances move once; every load case moves b in and theta out.
+the cluster ordering) is computed on the host with NumPy and moved to the device; the face
+conductances move once. The prepared system keeps its arrays on the device
+(:class:`~itr_fv.solvers.backends.PreparedSystem`: ``xp``, ``g``, ``clusters``,
+``to_host``): the driver builds every load vector there, the solution stays there, and the
+gauge, the mean flux and the energy tensor are computed there; only the 3x3 tensors and the
+fields asked for come back.
 
-Memory on the device: the conductances (3 N), the CG vectors x, r, p, q and b (5 N), the
-half spectrum (~N complex) and the operator's temporaries (~3 N), in ``dtype``.
+Memory on the device: the conductances (3 N) and the CG vectors x, r, p, q (4 N) in
+``dtype``, the float64 load vector (N, plus its ``dtype`` copy for float32), the half
+spectrum (~N complex) in ``fft_dtype``, the operator's temporaries (~3 N) and the float64
+solutions of the earlier load cases (kept for the energy tensor).
 """
 
 from __future__ import annotations
@@ -25,14 +31,17 @@ from typing import Any
 
 import numpy as np
 
+from itr_fv.discrete.connectivity import ClusterProjection
+from itr_fv.discrete.operator import apply_operator
 from itr_fv.discrete.problem import DiscreteSystem
 from itr_fv.solvers.backends import Backend, LoadCaseSolution, PreparedSystem, register_backend
 from itr_fv.solvers.krylov import ArrayOps, conjugate_gradients
 
-from .numba_backend import check_float32_tol, float_dtype, reference_conductance
-from .spectral import inverse_laplacian
+from .numba_backend import check_float32_tol, float_dtype
+from .spectral import inverse_laplacian, reference_conductance
 
-__all__ = ["ArrayAPIBackend", "ArrayAPIOps", "NAMESPACES", "DEVICES", "resolve_device"]
+__all__ = ["ArrayAPIBackend", "ArrayAPIOps", "NAMESPACES", "DEVICES", "PRECONDITIONERS",
+           "KERNELS", "resolve_device"]
 
 #: The float32 floor of this backend in units of ``float32_min_tol``: its operator sums in
 #: float32 (the numba kernels in float64), and CG stalled at 1.09e-6 on the 64^3 dense
@@ -42,6 +51,13 @@ FLOAT32_FLOOR_FACTOR = 4.0
 #: Array libraries the backend can run on, and the devices it knows.
 NAMESPACES = ("numpy", "array_api_strict", "cupy", "torch")
 DEVICES = ("cpu", "cuda", "auto")
+#: Preconditioners: the FFT Laplacian inverse, or the particle-deflated aggregation
+#: multigrid of :mod:`itr_fft.array_api_multigrid` (high contrast, resistive interfaces).
+PRECONDITIONERS = ("fft", "multigrid")
+#: The operator and CG updates: whole-array expressions (any namespace), the fused kernels
+#: of :mod:`itr_fft.fused_kernels` (numba's CUDA target), or ``"auto"``: fused on a CUDA
+#: device with CuPy where numba's CUDA target is usable, else portable.
+KERNELS = ("auto", "portable", "fused")
 
 
 def _cuda_available() -> str | None:
@@ -115,6 +131,11 @@ def _namespace(name: str) -> Any:
     return xp
 
 
+def _xp_float(xp: Any, dtype: np.dtype) -> Any:
+    """The namespace's float dtype of the same precision as the NumPy ``dtype``."""
+    return xp.float64 if dtype == np.float64 else xp.float32
+
+
 def _device_of(xp: Any, name: str, device: str) -> Any:
     if name == "torch":
         return "cuda" if device == "cuda" else "cpu"
@@ -177,66 +198,63 @@ class ArrayAPIOps(ArrayOps):
 
 
 class _Operator:
-    """A x = sum_d g_d (x - x_{+d}) - shift_{+1}(g_d (x - x_{+d})) (the model's stencil)."""
+    """``out = A x`` by :func:`itr_fv.discrete.operator.apply_operator` (the one stencil)
+    on the device conductances ``g`` of namespace ``xp``."""
 
     def __init__(self, xp: Any, g: Any) -> None:
         self.xp = xp
         self.g = g
 
     def apply(self, x: Any, out: Any) -> None:
-        xp = self.xp
-        acc = None
-        for d in range(3):
-            up = self.g[d, ...] * (x - xp.roll(x, -1, axis=d))
-            term = up - xp.roll(up, 1, axis=d)
-            acc = term if acc is None else acc + term
-        out[...] = acc
+        apply_operator(self.g, x, out)
 
 
-class _Clusters:
-    """Removes the mean of every connected cluster (segment sums over a sorted order)."""
+class _Clusters(ClusterProjection):
+    """:class:`~itr_fv.discrete.connectivity.ClusterProjection` on a device of ``xp`` (the
+    constructor that :mod:`itr_fft.array_api_multigrid`'s tests use)."""
 
     def __init__(self, xp: Any, device: Any, labels: np.ndarray, dtype: Any) -> None:
-        flat = labels.ravel()
-        order = np.argsort(flat, kind="stable")
-        counts = np.bincount(flat)
-        ends = np.cumsum(counts) - 1
-        self.xp = xp
-        self.shape = labels.shape
-        self.order = xp.asarray(order.astype(np.int64), device=device)
-        self.ends = xp.asarray(ends.astype(np.int64), device=device)
-        self.labels = xp.asarray(flat.astype(np.int64), device=device)
-        self.counts = xp.asarray(counts.astype(np.float64), device=device)
-        self.dtype = dtype
-
-    def project(self, v: Any) -> None:
-        xp = self.xp
-        flat = xp.astype(xp.reshape(v, (-1,)), xp.float64)
-        running = xp.cumulative_sum(xp.take(flat, self.order))
-        at_end = xp.take(running, self.ends)
-        sums = xp.concat([at_end[:1], at_end[1:] - at_end[:-1]])
-        means = xp.astype(sums / self.counts, self.dtype)
-        v -= xp.reshape(xp.take(means, self.labels), self.shape)
+        super().__init__(labels, like=xp.zeros((1,), dtype=dtype, device=device))
 
 
 class _FFTPreconditioner:
-    """z = (g_ref L)^+ r by real FFTs; cluster means removed when there are several."""
+    """z = (g_ref L)^+ r by real FFTs in ``fft_dtype``; cluster means removed when there
+    are several. With float32 FFTs and float64 vectors, r is rounded to float32 on the
+    way in and z comes back in float32 (CG promotes it where it keeps it), as the numba
+    backend's ``fft_dtype``."""
 
     def __init__(self, xp: Any, device: Any, shape: tuple[int, int, int], g_ref: float,
-                 dtype: Any, clusters: _Clusters | None) -> None:
+                 fft_dtype: Any, clusters: ClusterProjection | None) -> None:
         inverse = inverse_laplacian(shape, g_ref)
         self.xp = xp
         self.shape = shape
-        self.inverse = xp.asarray(inverse, dtype=dtype, device=device)
+        self.fft_dtype = fft_dtype
+        self.inverse = xp.asarray(inverse, dtype=fft_dtype, device=device)
         self.clusters = clusters
 
     def apply(self, r: Any) -> Any:
         xp = self.xp
         axes = (0, 1, 2)
-        z = xp.fft.irfftn(xp.fft.rfftn(r, axes=axes) * self.inverse, s=self.shape, axes=axes)
+        r_in = xp.astype(r, self.fft_dtype, copy=False)
+        z = xp.fft.irfftn(xp.fft.rfftn(r_in, axes=axes) * self.inverse, s=self.shape,
+                          axes=axes)
         if self.clusters is not None:
             self.clusters.project(z)
         return z
+
+
+def _use_fused(kernels: str, device: str, namespace: str) -> bool:
+    """Whether the fused kernels of :mod:`itr_fft.fused_kernels` run this solve."""
+    if kernels == "portable":
+        return False
+    from .fused_kernels import fused_available
+
+    usable = fused_available() and namespace in ("cupy", "numpy")
+    if kernels == "fused" and not usable:
+        raise ValueError("kernels: 'fused' needs numba's CUDA target with a CUDA device "
+                         "and CuPy arrays (or NUMBA_ENABLE_CUDASIM=1 with NumPy arrays); "
+                         "use kernels='portable' or 'auto'")
+    return usable and (kernels == "fused" or (device == "cuda" and namespace == "cupy"))
 
 
 class _Prepared(PreparedSystem):
@@ -245,30 +263,54 @@ class _Prepared(PreparedSystem):
         device, ns = resolve_device(backend.device, backend.namespace)
         xp = _namespace(ns)
         dev = _device_of(xp, ns, device)
-        dtype = xp.float64 if backend.dtype == np.float64 else xp.float32
-        g = system.g
-        g_ref = reference_conductance(g)
+        dtype = _xp_float(xp, backend.dtype)
         self.xp, self.dev, self.dtype = xp, dev, dtype
-        self.g = xp.asarray(g, dtype=dtype, device=dev)
-        self.clusters = (None if system.labels is None
-                         else _Clusters(xp, dev, system.labels, dtype))
-        self.operator = _Operator(xp, self.g)
-        self.preconditioner = _FFTPreconditioner(xp, dev, tuple(g.shape[1:]), g_ref, dtype,
-                                                 self.clusters)
-        self.ops = ArrayAPIOps(xp)
+        host = isinstance(system.g, np.ndarray)
+        g_ref = reference_conductance(system.g)
+        self.g = xp.asarray(system.g, dtype=dtype, device=dev)
+        self.clusters = ClusterProjection(system.labels, like=self.g)
+        several = self.clusters.n_clusters > 1
+        self._project = self.clusters.project if several else None
+        fused = _use_fused(backend.kernels, device, ns)
+        if fused:
+            from .fused_kernels import FusedOperator, FusedOps
+
+            self.operator, self.ops = FusedOperator(self.g), FusedOps()
+        else:
+            self.operator, self.ops = _Operator(xp, self.g), ArrayAPIOps(xp)
         self.info = {"g_ref": g_ref, "k_ref": g_ref * voxel_m, "device": device,
-                     "namespace": ns, "dtype": backend.dtype.name}
+                     "namespace": ns, "dtype": backend.dtype.name,
+                     "fft_dtype": backend.fft_dtype_for().name,
+                     "kernels": "fused" if fused else "portable",
+                     "preconditioner": backend.preconditioner}
+        if backend.preconditioner == "multigrid":
+            from .array_api_multigrid import ParticleMultigridPreconditioner
+
+            g_host = system.g if host else to_numpy(system.g)
+            self.preconditioner = ParticleMultigridPreconditioner(
+                xp, g_host, system.particle_ids, device=dev, dtype=np.float32,
+                g_device=self.g, project=self._project)
+            self.info.update(self.preconditioner.info)
+        else:
+            fft_dtype = _xp_float(xp, backend.fft_dtype_for())
+            self.preconditioner = _FFTPreconditioner(xp, dev, tuple(self.g.shape[1:]), g_ref,
+                                                     fft_dtype,
+                                                     self.clusters if several else None)
+
+    def to_host(self, x: Any) -> np.ndarray:
+        """A host NumPy copy of one of this system's device arrays."""
+        return to_numpy(x)
 
     def solve(self, b, x0, tol, maxiter, callback=None) -> LoadCaseSolution:
         xp = self.xp
-        bx = xp.asarray(np.asarray(b), dtype=self.dtype, device=self.dev)
+        bx = xp.astype(xp.asarray(b, device=self.dev), self.dtype, copy=False)
         x = (xp.zeros(bx.shape, dtype=self.dtype, device=self.dev) if x0 is None else
              xp.asarray(np.array(x0, dtype=np.float64), dtype=self.dtype, device=self.dev))
-        project = None if self.clusters is None else self.clusters.project
         out = conjugate_gradients(self.operator, bx, x, tol=tol, maxiter=maxiter,
                                   preconditioner=self.preconditioner, callback=callback,
-                                  ops=self.ops, project=project)
-        theta = np.asarray(to_numpy(x), dtype=np.float64)
+                                  ops=self.ops, project=self._project)
+        del bx
+        theta = xp.astype(x, xp.float64, copy=False)
         return LoadCaseSolution(theta, out.iterations, out.history, out.residual, out.restarts)
 
 
@@ -283,28 +325,87 @@ class ArrayAPIBackend(Backend):
     namespace : {"numpy", "array_api_strict", "cupy", "torch"}, optional
         Array library (default: NumPy on the CPU, CuPy, else PyTorch, on CUDA).
     dtype : np.float64 or np.float32
-        Precision of the vectors, conductances and FFTs (reductions in float64).
+        Precision of the vectors and conductances (reductions in float64).
         float32 needs ``tol >= 4 float32_min_tol(shape)`` (:data:`FLOAT32_FLOOR_FACTOR`).
+    fft_dtype : np.float64 or np.float32, optional
+        Precision of the preconditioner's FFTs only, the option of the same name of the
+        numba backend (:class:`~itr_fft.numba_backend.NumbaFFTBackend`): the CG vectors,
+        the operator, the residual check and the converged answer stay in ``dtype``.
+        Default: ``dtype`` (float32 vectors always take float32 FFTs). float32 FFTs with
+        float64 vectors halve the spectrum's memory and traffic.
+    preconditioner : {"fft", "multigrid"}
+        The FFT Laplacian inverse, or the particle-deflated aggregation multigrid
+        (:class:`~itr_fft.array_api_multigrid.ParticleMultigridPreconditioner`: its hierarchy
+        built once on the host with the numba code, applied on the device; 5x fewer
+        iterations on AlN-like contrast on the CPU).
+    kernels : {"auto", "portable", "fused"}
+        The operator and CG's vector updates as whole-array expressions (``"portable"``, any
+        namespace) or as the fused kernels of :mod:`itr_fft.fused_kernels`; ``"auto"``
+        takes the fused ones on a CUDA device with CuPy where numba's CUDA target works.
     """
 
     name = "array_api"
     default_maxiter = 3000
 
     def __init__(self, device: str = "auto", namespace: str | None = None,
-                 dtype: Any = np.float64) -> None:
+                 dtype: Any = np.float64, fft_dtype: Any = None, *,
+                 preconditioner: str = "fft", kernels: str = "auto") -> None:
         resolve_device(device, namespace)  # checks the pair before any solve
+        if preconditioner not in PRECONDITIONERS:
+            raise ValueError(f"preconditioner: expected one of {PRECONDITIONERS}, got "
+                             f"{preconditioner!r}")
+        if kernels not in KERNELS:
+            raise ValueError(f"kernels: expected one of {KERNELS}, got {kernels!r}")
         self.device = device
         self.namespace = namespace
         self.dtype = float_dtype(dtype, "dtype")
+        self.fft_dtype = None if fft_dtype is None else float_dtype(fft_dtype, "fft_dtype")
+        self.preconditioner = preconditioner
+        self.kernels = kernels
+
+    def array_namespace(self) -> tuple[Any, Any]:
+        """The namespace and device of the solve: the driver builds the face conductances
+        there (they move to the device once per geometry, then one pass per parameter
+        set)."""
+        device, ns = resolve_device(self.device, self.namespace)
+        xp = _namespace(ns)
+        return xp, _device_of(xp, ns, device)
+
+    def fft_dtype_for(self) -> np.dtype:
+        """Precision the preconditioner's FFTs run in (float32 with float32 vectors)."""
+        if self.dtype == np.float32 or self.fft_dtype is None:
+            return self.dtype
+        return self.fft_dtype
+
+    def _array_bytes_per_voxel(self) -> int:
+        # 3 conductances and 4 CG vectors in dtype, the float64 load vector and solutions
+        # of two earlier load cases, the half spectrum (complex) in fft_dtype and 3
+        # temporaries
+        # temporaries; the face classes the conductances are built from (int32 slots per
+        # axis and the material ids: 16 B); the multigrid's hierarchy and its peak during an
+        # application (28 + 56 B, measured with tracemalloc at 64^3, AlN-60)
+        item, fft = self.dtype.itemsize, self.fft_dtype_for().itemsize
+        mg = 84 if self.preconditioner == "multigrid" else 0
+        return int(math.ceil(item * (3 + 4 + 3) + 8 * 3 + 2 * fft + 16 + mg))
 
     def bytes_per_voxel(self) -> int:
-        # 3 conductances, 5 CG vectors, half spectrum (complex) and 3 temporaries, plus
-        # the geometry's set-up peak shared with the other backends
-        return int(math.ceil(self.dtype.itemsize * (3 + 5 + 2 + 3) + 40))
+        # the arrays (on the host on a CPU; counted here on a GPU too, to stay on the safe
+        # side) plus the geometry's set-up peak shared with the other backends
+        return self._array_bytes_per_voxel() + 40
+
+    def device_bytes_per_voxel(self) -> int:
+        device, _ = resolve_device(self.device, self.namespace)
+        return 0 if device == "cpu" else self._array_bytes_per_voxel()
 
     def options(self) -> dict[str, Any]:
-        return {"device": self.device, "namespace": self.namespace,
-                "dtype": self.dtype.name}
+        opts = {"device": self.device, "namespace": self.namespace, "dtype": self.dtype.name}
+        if self.fft_dtype is not None:
+            opts["fft_dtype"] = self.fft_dtype.name
+        if self.preconditioner != "fft":
+            opts["preconditioner"] = self.preconditioner
+        if self.kernels != "auto":
+            opts["kernels"] = self.kernels
+        return opts
 
     def check(self, shape: tuple[int, int, int], tol: float) -> None:
         check_float32_tol(self.dtype, shape, tol, factor=FLOAT32_FLOOR_FACTOR)

@@ -41,6 +41,8 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from itr_fv.discrete.operator import apply_operator
+
 from .deflation import group_operator
 from .multigrid import AggregationMultigrid
 
@@ -53,9 +55,8 @@ def face_stencil(xp: Any, g: Any, x: Any, s: Any | None = None) -> Any:
     """``A x`` of the 7-point face operator with a diagonal excess.
 
     ``A x = sum_d [g_d (x - x_{+d}) - shift_{+d}(g_d (x - x_{+d}))] + s x`` on the periodic
-    grid (the flux form of :class:`itr_fft.array_api_backend._Operator`). Kept here, small
-    and local, so that it can become the shared array-API stencil
-    (``itr_fv.discrete.operator.apply_operator(g, x) + s * x``) in one line.
+    grid: the package's one array-API stencil
+    (:func:`itr_fv.discrete.operator.apply_operator`) plus the excess.
 
     Parameters
     ----------
@@ -72,14 +73,8 @@ def face_stencil(xp: Any, g: Any, x: Any, s: Any | None = None) -> Any:
     array, shape (n1, n2, n3)
         Net outflow per face area, W/m^2, in the precision of ``g`` and ``x``.
     """
-    acc = None
-    for d in range(3):
-        up = g[d, ...] * (x - xp.roll(x, -1, axis=d))
-        term = up - xp.roll(up, 1, axis=d)
-        acc = term if acc is None else acc + term
-    if s is not None:
-        acc = acc + s * x
-    return acc
+    acc = apply_operator(g, x)
+    return acc if s is None else acc + s * x
 
 
 def _to_host(x: Any) -> np.ndarray:

@@ -19,11 +19,11 @@ simulator (``NUMBA_ENABLE_CUDASIM=1`` set before ``numba.cuda`` is first importe
 runs the same kernels on the CPU for the tests. Every kernel sees the grid flattened to 1-D
 (voxel ``t = (i n2 + j) n3 + k``, periodic neighbours ``t +- n2 n3``, ``t +- n3``,
 ``t +- 1`` wrapped per axis) and loops grid-stride over it. The stencil accumulates in the
-array's dtype in the order of the array-API ``_Operator``; reductions accumulate float64
-products per thread, add them by a tree in shared memory per block and sum the block
-partials on the host (no atomics: for a given launch shape the result does not depend on
-scheduling). On a GPU, NVVM may contract ``a * b + c`` into a fused multiply-add, so values
-differ from NumPy's in the last bit at most.
+array's dtype in the order of :func:`itr_fv.discrete.operator.apply_operator`; reductions
+accumulate float64 products per thread, add them by a tree in shared memory per block and
+sum the block partials on the host (no atomics: for a given launch shape the result does not
+depend on scheduling). On a GPU, NVVM may contract ``a * b + c`` into a fused multiply-add,
+so values differ from NumPy's in the last bit at most.
 
 Memory traffic, in arrays of N values read + written (:data:`TRAFFIC`; the stencil's
 neighbours and the conductances ``g_d[p - e_d]`` come from the L2 cache when it holds about
@@ -111,41 +111,49 @@ def _stencil_functions(idx: SimpleNamespace) -> SimpleNamespace:
     coords, neighbours = idx.coords, idx.neighbours
 
     @cuda.jit(device=True)
-    def term(g, d, x, t, up, down):
-        """g_d[t] (x_t - x_up) - g_d[down] (x_down - x_t): axis d's share of (A x)_t."""
-        return g[d, t] * (x[t] - x[up]) - g[d, down] * (x[down] - x[t])
+    def flows(g, d, x, t, up, down):
+        """Axis d's two face flows at t: g_d[t] (x_t - x_up) and g_d[down] (x_down - x_t)."""
+        return g[d, t] * (x[t] - x[up]), g[d, down] * (x[down] - x[t])
 
     @cuda.jit(device=True)
     def stencil_at(g, x, t, n1, n2, n3):
-        """(A x)_t in x's dtype, summed over the axes in the order of the array-API path."""
+        """(A x)_t in x's dtype, summed term by term in the order of
+        :func:`itr_fv.discrete.operator.apply_operator` (+up_0 -down_0 +up_1 ...), so the
+        results agree to the last bit where no multiply-add is contracted."""
         i, j, k = coords(t, n2, n3)
         up, down = neighbours(t, i, n1, n2 * n3)
-        acc = term(g, 0, x, t, up, down)
+        u, w = flows(g, 0, x, t, up, down)
+        acc = u - w
         up, down = neighbours(t, j, n2, n3)
-        acc = acc + term(g, 1, x, t, up, down)
+        u, w = flows(g, 1, x, t, up, down)
+        acc = (acc + u) - w
         up, down = neighbours(t, k, n3, 1)
-        return acc + term(g, 2, x, t, up, down)
+        u, w = flows(g, 2, x, t, up, down)
+        return (acc + u) - w
 
     @cuda.jit(device=True)
-    def terms3(g, d, x, t, up, down):
-        """Axis d's share of (A x_f)_t for the fields f = 0, 1, 2 of x (shape (3, N))."""
+    def flows3(g, d, x, t, up, down):
+        """Axis d's face flows at t for the fields f = 0, 1, 2 of x (shape (3, N)), each
+        conductance read once: (up_0, down_0, up_1, down_1, up_2, down_2)."""
         gu = g[d, t]
         gd = g[d, down]
-        return (gu * (x[0, t] - x[0, up]) - gd * (x[0, down] - x[0, t]),
-                gu * (x[1, t] - x[1, up]) - gd * (x[1, down] - x[1, t]),
-                gu * (x[2, t] - x[2, up]) - gd * (x[2, down] - x[2, t]))
+        return (gu * (x[0, t] - x[0, up]), gd * (x[0, down] - x[0, t]),
+                gu * (x[1, t] - x[1, up]), gd * (x[1, down] - x[1, t]),
+                gu * (x[2, t] - x[2, up]), gd * (x[2, down] - x[2, t]))
 
     @cuda.jit(device=True)
     def stencil3_at(g, x, t, n1, n2, n3):
         """(A x_f)_t for the three fields, each summed as in :func:`stencil_at`."""
         i, j, k = coords(t, n2, n3)
         up, down = neighbours(t, i, n1, n2 * n3)
-        a0, a1, a2 = terms3(g, 0, x, t, up, down)
+        u0, w0, u1, w1, u2, w2 = flows3(g, 0, x, t, up, down)
+        a0, a1, a2 = u0 - w0, u1 - w1, u2 - w2
         up, down = neighbours(t, j, n2, n3)
-        b0, b1, b2 = terms3(g, 1, x, t, up, down)
+        u0, w0, u1, w1, u2, w2 = flows3(g, 1, x, t, up, down)
+        a0, a1, a2 = (a0 + u0) - w0, (a1 + u1) - w1, (a2 + u2) - w2
         up, down = neighbours(t, k, n3, 1)
-        c0, c1, c2 = terms3(g, 2, x, t, up, down)
-        return (a0 + b0) + c0, (a1 + b1) + c1, (a2 + b2) + c2
+        u0, w0, u1, w1, u2, w2 = flows3(g, 2, x, t, up, down)
+        return (a0 + u0) - w0, (a1 + u1) - w1, (a2 + u2) - w2
 
     return SimpleNamespace(stencil_at=stencil_at, stencil3_at=stencil3_at)
 

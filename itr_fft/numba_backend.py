@@ -45,7 +45,7 @@ from . import _kernels as K
 from . import _mg_kernels as MG
 from .deflation import ParticleDeflation
 from .multigrid import MG_BYTES_PER_VOXEL, AggregationMultigrid
-from .spectral import laplacian_symbol
+from .spectral import laplacian_symbol, reference_conductance
 
 __all__ = ["NumbaFFTBackend", "reference_conductance", "FLOAT32_MIN_TOL", "float32_min_tol",
            "choose_preconditioner", "AUTO_CONTRAST", "PRECONDITIONERS",
@@ -107,43 +107,6 @@ def choose_preconditioner(system: DiscreteSystem) -> str:
 
 #: Grids with fewer voxels than this run single-threaded by default.
 SERIAL_BELOW = 40 ** 3
-
-
-def reference_conductance(g: np.ndarray, reference: str | float = "geometric") -> float:
-    """Face conductance g_ref of the constant-coefficient preconditioner, W/(m^2 K).
-
-    Parameters
-    ----------
-    g : ndarray, shape (3, n1, n2, n3)
-        Face conductances (faces with g = 0 are ignored).
-    reference : {"geometric", "arithmetic", "harmonic", "min", "max"} or float
-        Mean of the positive face conductances to use, or a value in W/(m^2 K).
-
-    Returns
-    -------
-    float
-    """
-    if not isinstance(reference, str):
-        v = float(reference)
-        if not math.isfinite(v) or v <= 0:
-            raise ValueError(f"reference: expected a positive conductance, got {reference!r}")
-        return v
-    if reference == "geometric":
-        s, c = K.log_sum_positive(g)
-        return float(math.exp(s / c)) if c else 1.0
-    pos = g[g > 0]
-    if pos.size == 0:
-        return 1.0
-    if reference == "arithmetic":
-        return float(pos.mean())
-    if reference == "harmonic":
-        return float(pos.size / np.sum(1.0 / pos))
-    if reference == "min":
-        return float(pos.min())
-    if reference == "max":
-        return float(pos.max())
-    raise ValueError(f"reference: unknown choice {reference!r} (geometric, arithmetic, "
-                     "harmonic, min, max or a number)")
 
 
 class _Preconditioner:

@@ -4,7 +4,8 @@ The same preconditioner as ``"itr_fft"`` (the exact inverse of the periodic 7-po
 Laplacian with face conductance ``g_ref``, the geometric mean of the positive face
 conductances, applied with real FFTs in float64) and the same CG
 (:func:`itr_fv.solvers.krylov.conjugate_gradients`), but the operator is
-:func:`itr_fv.discrete.model.apply_operator` (array expressions) and the vector operations are
+:func:`itr_fv.discrete.operator.apply_operator` (array expressions), the cluster projection
+:class:`itr_fv.discrete.connectivity.ClusterProjection` and the vector operations are
 numpy's. It needs no compiler and is the template of a new backend: one module, one
 registration. Slower than ``"itr_fft"`` (unfused array passes, one thread).
 
@@ -20,12 +21,13 @@ from typing import Any
 import numpy as np
 import scipy.fft
 
-from itr_fv.discrete.model import apply_operator
+from itr_fv.discrete.connectivity import ClusterProjection
+from itr_fv.discrete.operator import apply_operator
 from itr_fv.discrete.problem import DiscreteSystem
 from itr_fv.solvers.backends import Backend, LoadCaseSolution, PreparedSystem, register_backend
 from itr_fv.solvers.krylov import conjugate_gradients
 
-from .spectral import inverse_laplacian
+from .spectral import inverse_laplacian, reference_conductance
 
 __all__ = ["ScipyFFTBackend"]
 
@@ -35,50 +37,42 @@ class _Operator:
         self.g = g
 
     def apply(self, x: np.ndarray, out: np.ndarray) -> None:
-        out[...] = apply_operator(self.g, x)
+        apply_operator(self.g, x, out)
 
 
 class _Preconditioner:
     """z = (g_ref L)^+ r, zero mode removed; cluster means removed when there are several."""
 
-    def __init__(self, g: np.ndarray, labels: np.ndarray | None) -> None:
+    def __init__(self, g: np.ndarray, clusters: ClusterProjection | None) -> None:
         shape = g.shape[1:]
-        positive = g[g > 0]
-        g_ref = float(np.exp(np.mean(np.log(positive)))) if positive.size else 1.0
+        g_ref = reference_conductance(g)
         self.inverse = inverse_laplacian(shape, g_ref)
         self.shape = shape
         self.g_ref = g_ref
-        self.labels = labels
+        self.clusters = clusters
 
     def apply(self, r: np.ndarray) -> np.ndarray:
         z = scipy.fft.irfftn(scipy.fft.rfftn(r) * self.inverse, s=self.shape)
-        if self.labels is not None:
-            _remove_cluster_means(z, self.labels)
+        if self.clusters is not None:
+            self.clusters.project(z)
         return z
-
-
-def _remove_cluster_means(v: np.ndarray, labels: np.ndarray) -> None:
-    flat = labels.ravel()
-    sums = np.bincount(flat, weights=v.ravel())
-    v -= (sums / np.bincount(flat))[labels]
 
 
 class _Prepared(PreparedSystem):
     def __init__(self, system: DiscreteSystem, voxel_m: float) -> None:
+        self.clusters = ClusterProjection(system.labels)
+        several = self.clusters if self.clusters.n_clusters > 1 else None
         self.operator = _Operator(system.g)
-        self.preconditioner = _Preconditioner(system.g, system.labels)
-        self.labels = system.labels
+        self.preconditioner = _Preconditioner(system.g, several)
+        self._project = None if several is None else several.project
         self.info = {"g_ref": self.preconditioner.g_ref,
                      "k_ref": self.preconditioner.g_ref * voxel_m}
-
-    def _project(self, v: np.ndarray) -> None:
-        _remove_cluster_means(v, self.labels)
 
     def solve(self, b, x0, tol, maxiter, callback=None) -> LoadCaseSolution:
         x = np.zeros(b.shape) if x0 is None else np.array(x0, dtype=np.float64, copy=True)
         out = conjugate_gradients(self.operator, b, x, tol=tol, maxiter=maxiter,
                                   preconditioner=self.preconditioner, callback=callback,
-                                  project=None if self.labels is None else self._project)
+                                  project=self._project)
         return LoadCaseSolution(x, out.iterations, out.history, out.residual, out.restarts)
 
 

@@ -1,5 +1,6 @@
-"""The constant-coefficient periodic Laplacian in Fourier space: the one place its symbol is
-written, for every FFT preconditioner (numba, array-API, plain SciPy).
+"""The constant-coefficient periodic Laplacian in Fourier space and its reference face
+conductance: the one place each is written, for every FFT preconditioner (numba,
+array-API, plain SciPy).
 
 On an n1 x n2 x n3 periodic grid the 7-point Laplacian with face conductance ``g_ref``
 (W/(m^2 K)) has the eigenvalues ``g_ref * sum_d 4 sin^2(pi xi_d / n_d)`` (per unit voxel
@@ -8,9 +9,15 @@ area: the voxel edge cancels between the operator and the load), ``xi_d = 0 .. n
 
 from __future__ import annotations
 
+import math
+from typing import Any
+
 import numpy as np
 
-__all__ = ["laplacian_symbol", "inverse_laplacian"]
+__all__ = ["laplacian_symbol", "inverse_laplacian", "reference_conductance", "REFERENCES"]
+
+#: The means of the positive face conductances a reference conductance may be.
+REFERENCES = ("geometric", "arithmetic", "harmonic", "min", "max")
 
 
 def laplacian_symbol(n: int) -> np.ndarray:
@@ -34,3 +41,55 @@ def inverse_laplacian(shape: tuple[int, int, int], g_ref: float) -> np.ndarray:
     lam = s[0][:, None, None] + s[1][None, :, None] + s[2][None, None, : shape[2] // 2 + 1]
     with np.errstate(divide="ignore"):
         return np.where(lam > 0, 1.0 / (g_ref * lam), 0.0)
+
+
+def reference_conductance(g: Any, reference: str | float = "geometric") -> float:
+    """Face conductance g_ref of the constant-coefficient preconditioner, W/(m^2 K).
+
+    Array-API code: ``g`` may live on any device (NumPy, CuPy, ...); one axis at a time, so
+    the temporaries are a third of ``g``; sums in float64.
+
+    Parameters
+    ----------
+    g : array, shape (3, n1, n2, n3)
+        Face conductances (faces with g = 0 are ignored).
+    reference : {"geometric", "arithmetic", "harmonic", "min", "max"} or float
+        Mean of the positive face conductances to use, or a value in W/(m^2 K).
+
+    Returns
+    -------
+    float
+        1.0 where no face conducts.
+    """
+    if not isinstance(reference, str):
+        v = float(reference)
+        if not math.isfinite(v) or v <= 0:
+            raise ValueError(f"reference: expected a positive conductance, got {reference!r}")
+        return v
+    if reference not in REFERENCES:
+        raise ValueError(f"reference: unknown choice {reference!r} (geometric, arithmetic, "
+                         "harmonic, min, max or a number)")
+    import array_api_compat
+
+    xp = array_api_compat.array_namespace(g)
+    count, total, low, high = 0, 0.0, math.inf, 0.0
+    for d in range(3):
+        gd = xp.astype(g[d, ...], xp.float64)
+        positive = gd > 0
+        safe = xp.where(positive, gd, xp.ones_like(gd))
+        count += int(xp.sum(xp.astype(positive, xp.int64)))
+        if reference == "geometric":
+            total += float(xp.sum(xp.where(positive, xp.log(safe), xp.zeros_like(gd))))
+        elif reference == "arithmetic":
+            total += float(xp.sum(gd))
+        elif reference == "harmonic":
+            total += float(xp.sum(xp.where(positive, 1.0 / safe, xp.zeros_like(gd))))
+        elif reference == "min":
+            low = min(low, float(xp.min(xp.where(positive, gd, xp.full_like(gd, math.inf)))))
+        else:
+            high = max(high, float(xp.max(gd)))
+    if count == 0:
+        return 1.0
+    return {"geometric": lambda: math.exp(total / count), "arithmetic": lambda: total / count,
+            "harmonic": lambda: count / total, "min": lambda: low,
+            "max": lambda: high}[reference]()

@@ -150,6 +150,32 @@ def test_nearly_touching_arrays_under_the_segment_law():
         assert np.trace(res.k_eff) / 3 == pytest.approx(ref, rel=0.06)
 
 
+@pytest.mark.parametrize("contact, law", [("area", "staircase"), ("gap", "staircase"),
+                                          ("gap", "segment")])
+def test_each_law_refines_the_faces_its_geometry_names(contact, law):
+    """The staircase law refines the contact-zone faces (gap model only), the segment law
+    the cut faces; the law's conductances in array-api-strict equal its NumPy ones."""
+    import array_api_strict as xs
+
+    ms, _ = touching_array("bcc", 1.5e-6, 1.5e-9, 6)
+    mat = gap_materials(spots={("Al2O3", "Al2O3"): 2e-6})
+    if contact == "area":
+        mat = Materials(mat.conductivity, {("Al2O3", "silicone"): 2e-8,
+                                           ("Al2O3", "Al2O3"): 1e-7}, "silicone", contact="area")
+    geometry = face_geometry(ms, contact=contact, interface=law)
+    refinement = geometry.law.refinement(geometry)
+    if contact == "area":
+        assert refinement is None
+    for d in range(3 if refinement is not None else 0):
+        faces = refinement[d][0]
+        named = geometry.segments[d][0] if law == "staircase" else geometry.cuts.index[d]
+        np.testing.assert_array_equal(faces, np.asarray(named, dtype=np.int64))
+        assert faces.size
+    g = geometry.conductances(mat)
+    strict = geometry.conductances(mat, classes=geometry.face_classes().to(xs))
+    np.testing.assert_array_equal(np.from_dlpack(strict), g)
+
+
 def test_laws_declare_their_parameters_and_affinity():
     assert KINDS == PARAMETER_KINDS
     assert set(KINDS) == set(StaircaseLaw("gap").parameter_kinds) | set(

@@ -15,6 +15,7 @@ from itr_fv.solvers.choice import (
     worker_resources,
 )
 from itr_identify.cli import main
+from validation.gallery import build
 
 
 @pytest.fixture
@@ -137,3 +138,66 @@ def test_demo_solves_with_the_chosen_solver(tmp_path, capsys):
         assert f"solver {choice.SOLVERS[name].backend}" in line
     assert np.allclose(k["fv"], k["fft"], rtol=1e-6) and np.allclose(k["mg"], k["fft"],
                                                                       rtol=1e-6)
+
+
+def test_reproduce_on_the_device_equals_the_cpu_run(gpus, monkeypatch, tmp_path):
+    """``itr reproduce --device cuda`` end to end with a stand-in for the device: the device
+    check sees one GPU and the ``gpu`` choice's backend is the array-API backend on NumPy
+    (the same code CuPy runs). Its identified.json equals the CPU run's to 1e-6 relative."""
+    import json
+
+    from validation.bench_gpu import max_json_difference
+
+    tiny = ["--box-um", "12", "--voxel-um", "0.5", "--replicas", "2", "--no-progress",
+            "--fidelity", "quick", "--parametrisation", "gap", "--no-leave-one-out"]
+    assert main(["reproduce", *tiny, "--device", "cpu", "--out", str(tmp_path / "cpu")]) == 0
+    gpus(1)
+    stand_in = dict(SOLVERS)
+    stand_in["gpu"] = choice.SolverChoice("gpu", "array_api",
+                                          {"device": "cpu", "namespace": "numpy"}, "cuda")
+    monkeypatch.setattr(choice, "SOLVERS", stand_in)
+    assert main(["reproduce", *tiny, "--device", "cuda", "--out", str(tmp_path / "gpu")]) == 0
+    cpu = json.loads((tmp_path / "cpu" / "identified.json").read_text())
+    gpu = json.loads((tmp_path / "gpu" / "identified.json").read_text())
+    assert gpu["gap"]["parameters"].keys() == cpu["gap"]["parameters"].keys()
+    assert max_json_difference(gpu, cpu) <= 1e-6
+    report = (tmp_path / "gpu" / "report.md").read_text()
+    assert "by the solver 'gpu'" in report and "by the solver 'fft'" in (
+        tmp_path / "cpu" / "report.md").read_text()
+
+
+def test_a_gpu_solve_runs_only_on_the_worker_that_declares_a_gpu(monkeypatch):
+    """A local cluster of two in-process workers, one declaring GPU=1: every ``gpu`` solve of
+    the engine runs on that worker (the stand-in backend on NumPy), none on the other; the
+    results equal the CPU solver's to solver tolerance."""
+    from dask.distributed import Client, Scheduler, SpecCluster, Worker, get_task_stream
+
+    from itr_fv import Materials
+    from itr_surrogate.engine import RVEData, SolveEngine, SolveRequest
+
+    stand_in = dict(SOLVERS)
+    stand_in["gpu"] = choice.SolverChoice("gpu", "array_api",
+                                          {"device": "cpu", "namespace": "numpy"}, "cuda")
+    monkeypatch.setattr(choice, "SOLVERS", stand_in)
+    ms, mat = build("al2o3_60", 12, contact="gap")
+    params = mat.to_parameters()
+    name = next(k for k in params if k.startswith("R_"))
+    mats = [Materials.from_parameters({**params, name: r}, mat.matrix, contact="gap")
+            for r in (1e-8, 3e-8, 1e-7)]
+    rve = RVEData.of(ms)
+    specs = {"plain": {"cls": Worker, "options": {"nthreads": 1}},
+             "gpu": {"cls": Worker, "options": {"nthreads": 1, "resources": {"GPU": 1}}}}
+    with SpecCluster(workers=specs, scheduler={"cls": Scheduler, "options": {
+            "dashboard_address": None}}) as cluster, Client(cluster) as client:
+        client.wait_for_workers(2)
+        names = {a: w["name"] for a, w in client.scheduler_info()["workers"].items()}
+        with get_task_stream(client) as stream, SolveEngine(
+                scheduler=cluster.scheduler_address, echo=lambda s: None) as engine:
+            gpu = engine.solve([SolveRequest.for_materials(rve, m, 1e-10, solver="gpu")
+                                for m in mats])
+        workers = {names[t["worker"]] for t in stream.data}
+    assert len(stream.data) == 3 and workers == {"gpu"}
+    for m, res in zip(mats, gpu):
+        cpu = SolveEngine(echo=lambda s: None).solve_one(
+            SolveRequest.for_materials(rve, m, 1e-10))
+        assert np.allclose(res.k_diagonal, cpu.k_diagonal, rtol=1e-8)

@@ -1,10 +1,12 @@
 """Contact zones between nearly touching spheres: the pairs, their matrix films, and the
 voxels and faces of the thin part of each film.
 
-Two jobs of the gap contact model walk the same zones (:func:`contact_zones`, written once):
+Two jobs of the gap contact model walk the same zones (:func:`zone_table`, written once):
 :func:`fill_thin_films` gives the matrix voxels of a wedge thinner than a voxel to the
 spheres, and :func:`zone_segments` finds the faces of a zone whose conductance the staircase
-law takes from the analytic spheres along their centre-to-centre segments.
+law takes from the analytic spheres along their centre-to-centre segments. Both walk the
+cells of every zone in numba kernels (:mod:`itr_fv.discrete._geometry_kernels`);
+:func:`contact_zones` lists the same zones with their cells, one at a time.
 """
 
 from __future__ import annotations
@@ -17,10 +19,12 @@ import numpy as np
 
 from ..rve.microstructure import Microstructure
 from ..rve.sphere_geometry import min_image, particle_material_ids, segment_in_sphere
+from . import _geometry_kernels as K
+from .cut_cells import SHARES
 
-__all__ = ["DEFAULT_TOUCH_GAP_M", "SEGMENT_ZONE_VOXELS", "ContactZone", "near_contacts",
-           "wedge_radius", "contact_zones", "contact_films", "fill_thin_films",
-           "zone_segments"]
+__all__ = ["DEFAULT_TOUCH_GAP_M", "SEGMENT_ZONE_VOXELS", "ContactZone", "ZoneTable",
+           "near_contacts", "wedge_radius", "zone_table", "contact_zones", "contact_films",
+           "fill_thin_films", "zone_segments"]
 
 #: Particle pairs whose closest surface gap is at most this touch (m): they carry contact
 #: spots. The packer leaves ~1 nm between touching particles; nearly touching pairs in a
@@ -80,6 +84,20 @@ def wedge_radius(dist: float, ra: float, rb: float, h: float) -> float:
     return lo
 
 
+def _wedge_radii(dist: np.ndarray, ra: np.ndarray, rb: np.ndarray, h: float) -> np.ndarray:
+    """:func:`wedge_radius` of many contacts at once (the same bisection, elementwise), m."""
+    def film(rho: np.ndarray) -> np.ndarray:
+        return (dist - np.sqrt(np.maximum(ra * ra - rho * rho, 0.0))
+                - np.sqrt(np.maximum(rb * rb - rho * rho, 0.0)))
+    top = np.minimum(ra, rb)
+    lo, hi = np.zeros_like(top), top.copy()
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        thin = film(mid) <= h
+        lo, hi = np.where(thin, mid, lo), np.where(thin, hi, mid)
+    return np.where(film(top) <= h, top, lo)
+
+
 @dataclass(frozen=True)
 class ContactZone:
     """The thin part of the matrix film between two spheres and the voxels around it.
@@ -113,28 +131,109 @@ class ContactZone:
     cells: np.ndarray
 
 
-def contact_zones(ms: Microstructure, thickness_m: float, margin_voxels: float
-                  ) -> Iterator[ContactZone]:
-    """Every contact whose film is thinner than ``thickness_m`` (m) somewhere, with the voxels
-    of the box that holds its film thinner than that plus ``margin_voxels`` voxels."""
+@dataclass(frozen=True)
+class ZoneTable:
+    """The contact zones of one film thickness, as arrays with one row per zone.
+
+    Attributes
+    ----------
+    a, b : ndarray of int64, shape (Z,)
+        0-based particle indices (b may equal a: a sphere and its periodic image).
+    offset : ndarray, shape (Z, 3)
+        From the centre of a to the image of b that makes the contact, m.
+    centre_a, centre_b : ndarray, shape (Z, 3)
+        Centre of a in the box and of that image of b (``centre_a + offset``), m.
+    radius_a, radius_b : ndarray, shape (Z,)
+        Radii, m.
+    distance, gap : ndarray, shape (Z,)
+        Distance of the centres and closest-approach gap ``distance - r_a - r_b``, m.
+    direction : ndarray, shape (Z, 3)
+        Unit vector from a to b.
+    rho_max : ndarray, shape (Z,)
+        Distance from the line of centres within which the film is at most the zone's
+        thickness, m.
+    lo, hi : ndarray of int64, shape (Z, 3)
+        First and last unwrapped voxel index of the box around each zone, per axis.
+    """
+
+    a: np.ndarray
+    b: np.ndarray
+    offset: np.ndarray
+    centre_a: np.ndarray
+    centre_b: np.ndarray
+    radius_a: np.ndarray
+    radius_b: np.ndarray
+    distance: np.ndarray
+    gap: np.ndarray
+    direction: np.ndarray
+    rho_max: np.ndarray
+    lo: np.ndarray
+    hi: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.a.size)
+
+
+def zone_table(ms: Microstructure, thickness_m: float, margin_voxels: float) -> ZoneTable:
+    """Every contact whose film is thinner than ``thickness_m`` (m) somewhere, with the box
+    of voxels that holds its film thinner than that plus ``margin_voxels`` voxels.
+
+    Parameters
+    ----------
+    ms : Microstructure
+        With its particle table.
+    thickness_m : float
+        Film thickness that bounds a zone, m (> 0).
+    margin_voxels : float
+        Voxels added around the thin film on every side (>= 0).
+
+    Returns
+    -------
+    ZoneTable
+    """
+    if ms.particles is None:
+        raise ValueError("ms: contact zones need the particle table (a Microstructure from "
+                         "from_spheres or generate_rve)")
+    if not thickness_m > 0:
+        raise ValueError(f"thickness_m: expected a film thickness > 0 (m), got {thickness_m!r}")
+    if not margin_voxels >= 0:
+        raise ValueError(f"margin_voxels: expected a number >= 0, got {margin_voxels!r}")
     table = ms.particles
     shape, h = ms.shape, ms.voxel_m
     c = np.mod(table.centers_m, np.array(shape, dtype=np.float64) * h)
     r = table.radii_m
+    kept = []
     for a, b, D in near_contacts(ms, thickness_m):
-        dist = float(np.sqrt(D @ D))
-        gap0 = dist - r[a] - r[b]
-        if gap0 >= thickness_m or dist <= 0.0:
+        dist = float(np.sqrt(D @ D))  # as contact_zones computes it (BLAS), per contact
+        if dist - r[a] - r[b] >= thickness_m or dist <= 0.0:
             continue
-        u = D / dist
-        rho_max = wedge_radius(dist, r[a], r[b], thickness_m)
-        x_mid = c[a] + u * (r[a] + 0.5 * gap0)  # closest approach, unwrapped near c[a]
-        half = rho_max + margin_voxels * h
-        lo_i = np.floor((x_mid - half) / h - 0.5).astype(int)
-        hi_i = np.ceil((x_mid + half) / h - 0.5).astype(int)
-        ii = [np.arange(lo_i[k], hi_i[k] + 1) for k in range(3)]
+        kept.append((a, b, D, dist))
+    a = np.array([k[0] for k in kept], dtype=np.int64)
+    b = np.array([k[1] for k in kept], dtype=np.int64)
+    D = np.array([k[2] for k in kept], dtype=np.float64).reshape(-1, 3)
+    dist = np.array([k[3] for k in kept], dtype=np.float64)
+    gap0 = dist - r[a] - r[b]
+    u = D / dist[:, None]
+    rho_max = _wedge_radii(dist, r[a], r[b], thickness_m)
+    x_mid = c[a] + u * (r[a] + 0.5 * gap0)[:, None]  # closest approach, unwrapped near c[a]
+    half = (rho_max + margin_voxels * h)[:, None]
+    lo_i = np.floor((x_mid - half) / h - 0.5).astype(np.int64)
+    hi_i = np.ceil((x_mid + half) / h - 0.5).astype(np.int64)
+    return ZoneTable(a, b, D, c[a], c[a] + D, r[a], r[b], dist, gap0, u, rho_max, lo_i, hi_i)
+
+
+def contact_zones(ms: Microstructure, thickness_m: float, margin_voxels: float
+                  ) -> Iterator[ContactZone]:
+    """Every contact whose film is thinner than ``thickness_m`` (m) somewhere, with the voxels
+    of the box that holds its film thinner than that plus ``margin_voxels`` voxels (the
+    zones of :func:`zone_table`, one at a time)."""
+    zt = zone_table(ms, thickness_m, margin_voxels)
+    for z in range(len(zt)):
+        ii = [np.arange(zt.lo[z, k], zt.hi[z, k] + 1) for k in range(3)]
         cells = np.stack(np.meshgrid(*ii, indexing="ij"), axis=-1).reshape(-1, 3)
-        yield ContactZone(int(a), int(b), D, dist, gap0, u, rho_max, cells)
+        yield ContactZone(int(zt.a[z]), int(zt.b[z]), zt.offset[z],
+                          float(zt.distance[z]), float(zt.gap[z]), zt.direction[z],
+                          float(zt.rho_max[z]), cells)
 
 
 def contact_films(table, p_lo: np.ndarray, p_hi: np.ndarray, x_face: np.ndarray, d: int,
@@ -147,6 +246,9 @@ def contact_films(table, p_lo: np.ndarray, p_hi: np.ndarray, x_face: np.ndarray,
     the face centre from the line of centres, clipped below at the closest gap
     ``|c_q - c_p| - a_p - a_q`` (and at 0). A sphere meeting its own periodic image (p == q)
     faces that image one box length along e_d.
+
+    :func:`itr_fv.discrete.face_geometry.face_geometry` computes the same numbers in a numba
+    kernel (:func:`itr_fv.discrete._geometry_kernels.sphere_faces`).
 
     Returns
     -------
@@ -198,36 +300,41 @@ def fill_thin_films(ms: Microstructure) -> tuple[np.ndarray, np.ndarray, int]:
         Number of voxels that changed.
     """
     table = ms.particles
-    pid = ms.particle_ids.copy()
-    mid = ms.material_ids.copy()
+    threads = K.current_threads(math.prod(ms.shape))
+    pid = K.parallel_copy(ms.particle_ids, threads)
+    mid = K.parallel_copy(ms.material_ids, threads)
     if table is None or len(table) < 1:
         return pid, mid, 0
-    shape, h = ms.shape, ms.voxel_m
-    c = np.mod(table.centers_m, np.array(shape, dtype=np.float64) * h)
-    r = table.radii_m
+    zt = zone_table(ms, ms.voxel_m, 1.0)
+    if len(zt) == 0:
+        return pid, mid, 0
     mat_of = particle_material_ids(ms).astype(mid.dtype)
-    filled = 0
-    for z in contact_zones(ms, h, 1.0):
-        a, b = z.a, z.b
-        x = (z.cells + 0.5) * h
-        w = x - c[a]
-        t = w @ z.direction
-        rho2 = (w * w).sum(axis=1) - t * t
-        wrapped = tuple(np.mod(z.cells[:, k], shape[k]) for k in range(3))
-        free = pid[wrapped] == 0
-        da = np.sqrt((w * w).sum(axis=1)) - r[a]
-        wb = x - (c[a] + z.offset)
-        db = np.sqrt((wb * wb).sum(axis=1)) - r[b]
-        sel = (free & (rho2 <= z.rho_max * z.rho_max) & (t > 0.0) & (t < z.distance)
-               & (da > 0) & (db > 0))
-        if not sel.any():
-            continue
-        owner = np.where(da[sel] <= db[sel], a, b) + 1
-        target = tuple(w_[sel] for w_ in wrapped)
-        pid[target] = owner
-        mid[target] = mat_of[owner]
-        filled += int(sel.sum())
-    return pid, mid, filled
+    filled = K.zone_fill(pid, mid, mat_of, zt.a, zt.b, zt.centre_a, zt.centre_b, zt.radius_a,
+                         zt.radius_b, zt.direction, zt.distance, zt.rho_max, zt.lo, zt.hi,
+                         float(ms.voxel_m))
+    return pid, mid, int(filled)
+
+
+def _share_rule(share: Callable[[np.ndarray, int], np.ndarray] | None) -> int | None:
+    """The kernels' code of a share rule: 0 for None (1 per crossing), 1 for the staircase
+    share; None for any other rule (walked in NumPy)."""
+    if share is None:
+        return 0
+    if share is SHARES["staircase"]:
+        return 1
+    return None
+
+
+def _squares(values: np.ndarray) -> np.ndarray:
+    """``v ** 2`` of every value as a scalar power (``pow``): the zones square their scalars
+    so (``rho_max ** 2``, ``r ** 2``); an array's ``** 2`` is a product, which differs from
+    ``pow`` in the last bit for about 0.1 % of values."""
+    return np.array([float(v) ** 2 for v in values], dtype=np.float64)
+
+
+def _empty_segments() -> tuple[np.ndarray, ...]:
+    """The seven columns of an axis without zone faces (empty float64, as ever)."""
+    return tuple(np.asarray([]) for _ in range(7))
 
 
 def zone_segments(ms: Microstructure, share: Callable[[np.ndarray, int], np.ndarray] | None
@@ -247,42 +354,78 @@ def zone_segments(ms: Microstructure, share: Callable[[np.ndarray, int], np.ndar
         With its particle table.
     share : callable or None
         Interface share of a surface crossing (see
-        :func:`itr_fv.rve.sphere_geometry.segment_in_sphere`).
+        :func:`itr_fv.rve.sphere_geometry.segment_in_sphere`). None and the staircase share
+        (``SHARES["staircase"]``) run in a parallel numba kernel, any other rule in NumPy.
 
     Returns
     -------
     per axis: flat face index, length in sphere a, length in sphere b (m), summed interface
-    shares of the crossings of a and of b, particle ids (1-based) of a and b.
+    shares of the crossings of a and of b, particle ids (1-based) of a and b. A face in
+    two zones keeps the first zone's.
     """
-    table = ms.particles
+    h = ms.voxel_m
+    zt = zone_table(ms, SEGMENT_ZONE_VOXELS * h, 2.0)
+    rule = _share_rule(share)
+    if rule is None:
+        return _zone_segments_numpy(ms, zt, share)
+    if len(zt) == 0:
+        return tuple(_empty_segments() for _ in range(3))
+    sq = np.stack([_squares(zt.rho_max), _squares(zt.radius_a), _squares(zt.radius_b)],
+                  axis=1)
+    zones = dict(ca=zt.centre_a, cb=zt.centre_b, ra=zt.radius_a, rb=zt.radius_b, sq=sq,
+                 u=zt.direction, dist=zt.distance, lo=zt.lo, hi=zt.hi)
+    counts, flat, vals = K.zone_segment_faces(ms.shape, zones, h, rule,
+                                              K.current_threads(math.prod(ms.shape)))
+    n_faces = math.prod(ms.shape)
+    out, at = [], 0
+    for d in range(3):
+        m = int(counts[:, d].sum())
+        if m == 0:
+            out.append(_empty_segments())
+            continue
+        out.append(K.first_segments(flat[at:at + m], vals[at:at + m],
+                                    np.ascontiguousarray(counts[:, d]), zt.a, zt.b, n_faces))
+        at += m
+    return tuple(out)
+
+
+def _zone_segments_numpy(ms: Microstructure, zt: ZoneTable,
+                         share: Callable[[np.ndarray, int], np.ndarray]
+                         ) -> tuple[tuple[np.ndarray, ...], ...]:
+    """:func:`zone_segments` for any share rule, zone by zone in NumPy."""
     shape, h = ms.shape, ms.voxel_m
-    c = np.mod(table.centers_m, np.array(shape, dtype=np.float64) * h)
-    r = table.radii_m
-    out = [[[] for _ in range(7)] for _ in range(3)]
-    seen = [set() for _ in range(3)]
-    for z in contact_zones(ms, SEGMENT_ZONE_VOXELS * h, 2.0):
-        a, b, u = z.a, z.b, z.direction
-        x = (z.cells + 0.5) * h
-        cb = c[a] + z.offset
+    flats: list[list[np.ndarray]] = [[] for _ in range(3)]
+    vals: list[list[np.ndarray]] = [[] for _ in range(3)]
+    counts = np.zeros((len(zt), 3), dtype=np.int64)
+    for z in range(len(zt)):
+        ii = [np.arange(zt.lo[z, k], zt.hi[z, k] + 1) for k in range(3)]
+        cells = np.stack(np.meshgrid(*ii, indexing="ij"), axis=-1).reshape(-1, 3)
+        x = (cells + 0.5) * h
+        ca, u = zt.centre_a[z], zt.direction[z]
+        ra, rb = zt.radius_a[z], zt.radius_b[z]
         for d in range(3):
             xf = x.copy()
             xf[:, d] += 0.5 * h
-            w = xf - c[a]
+            w = xf - ca
             t = w @ u
             rho2 = np.maximum((w * w).sum(axis=1) - t * t, 0.0)
-            surf_a = np.sqrt(np.maximum(r[a] ** 2 - rho2, 0.0))
-            surf_b = z.distance - np.sqrt(np.maximum(r[b] ** 2 - rho2, 0.0))
-            sel = (rho2 <= z.rho_max ** 2) & (t > surf_a - h) & (t < surf_b + h)
+            surf_a = np.sqrt(np.maximum(ra ** 2 - rho2, 0.0))
+            surf_b = zt.distance[z] - np.sqrt(np.maximum(rb ** 2 - rho2, 0.0))
+            sel = (rho2 <= zt.rho_max[z] ** 2) & (t > surf_a - h) & (t < surf_b + h)
             if not sel.any():
                 continue
-            la, sa = segment_in_sphere(x[sel], d, h, c[a], r[a], share)
-            lb, sb = segment_in_sphere(x[sel], d, h, cb, r[b], share)
-            flat = np.ravel_multi_index(
-                tuple(np.mod(z.cells[sel, k], shape[k]) for k in range(3)), shape)
-            for f, la_, lb_, sa_, sb_ in zip(flat, la, lb, sa, sb):
-                if f in seen[d]:
-                    continue  # a face in two contact zones keeps the first
-                seen[d].add(f)
-                for k, v in enumerate((f, la_, lb_, sa_, sb_, a + 1, b + 1)):
-                    out[d][k].append(v)
-    return tuple(tuple(np.asarray(col) for col in axis) for axis in out)
+            la, sa = segment_in_sphere(x[sel], d, h, ca, ra, share)
+            lb, sb = segment_in_sphere(x[sel], d, h, zt.centre_b[z], rb, share)
+            flats[d].append(np.ravel_multi_index(
+                tuple(np.mod(cells[sel, k], shape[k]) for k in range(3)), shape))
+            vals[d].append(np.stack([la, lb, sa, sb], axis=1))
+            counts[z, d] = la.size
+    out = []
+    for d in range(3):
+        if not flats[d]:
+            out.append(_empty_segments())
+            continue
+        out.append(K.first_segments(np.concatenate(flats[d]), np.concatenate(vals[d]),
+                                    np.ascontiguousarray(counts[:, d]), zt.a, zt.b,
+                                    math.prod(shape)))
+    return tuple(out)

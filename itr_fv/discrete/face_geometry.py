@@ -1,6 +1,10 @@
 """Interface faces of a voxel image: where the labels change, their staircase factors,
 the particle pairs in contact and their films, and (segment law) the cut cells.
 
+The scans over the grid, the faces and the contact zones run in numba kernels on a pool of
+threads (:mod:`itr_fv.discrete._geometry_kernels`); the arrays are those of the NumPy code
+they replaced (``tests/test_geometry_build.py`` keeps a frozen copy of it).
+
 :func:`face_geometry` computes everything that does not depend on material values once; a
 parameter change only needs :meth:`FaceGeometry.conductances` again, which hands the
 geometry to its interface law (:mod:`itr_fv.discrete.interface_law`).
@@ -8,7 +12,9 @@ geometry to its interface law (:mod:`itr_fv.discrete.interface_law`).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import scipy.ndimage
@@ -16,8 +22,10 @@ import scipy.ndimage
 from ..materials.properties import Materials
 from ..rve.microstructure import Microstructure
 from ..rve.sphere_geometry import min_image, particle_material_ids, staircase_factor
-from .contact_zones import DEFAULT_TOUCH_GAP_M, contact_films
+from . import _geometry_kernels as K
+from .contact_zones import DEFAULT_TOUCH_GAP_M
 from .cut_cells import SurfaceCuts
+from .face_classes import FaceClasses
 from .interface_law import InterfaceLaw, StaircaseLaw, interface_law
 
 __all__ = ["FaceGeometry", "face_geometry", "face_conductances", "self_image_faces"]
@@ -77,6 +85,9 @@ class FaceGeometry:
         conductances (:mod:`itr_fv.discrete.interface_law`).
     cuts : SurfaceCuts, or None
         Faces that meet a sphere, with their segment geometry (segment law).
+
+    The host class arrays of the law (:meth:`face_classes`) are built on first use and
+    kept with the geometry (not pickled).
     """
 
     shape: tuple[int, int, int]
@@ -134,7 +145,21 @@ class FaceGeometry:
                                                     self.names[self.pair_material_ids[i, 1]])
                          for i in self.touching_pairs()))
 
-    def conductances(self, materials: Materials) -> np.ndarray:
+    def face_classes(self) -> FaceClasses:
+        """The host (NumPy) class arrays of this geometry under its law, built once
+        (:mod:`itr_fv.discrete.face_classes`); ``.to(xp, device)`` moves them."""
+        classes = self.__dict__.get("_face_classes")
+        if classes is None:
+            classes = self.law.face_classes(self)
+            object.__setattr__(self, "_face_classes", classes)
+        return classes
+
+    def __getstate__(self) -> dict:
+        state = dict(self.__dict__)
+        state.pop("_face_classes", None)  # derived, rebuilt on first use
+        return state
+
+    def conductances(self, materials: Materials, *, classes: FaceClasses | None = None) -> Any:
         """Face conductances per unit area, W/(m^2 K).
 
         Parameters
@@ -142,11 +167,15 @@ class FaceGeometry:
         materials : Materials
             Conductivities and resistances; every phase of the microstructure and every
             interface pair it holds must be present.
+        classes : FaceClasses, optional
+            This geometry's class arrays in the namespace and on the device the result
+            should be in (``self.face_classes().to(xp, device)``); default the host ones.
 
         Returns
         -------
-        g : ndarray, shape (3, n1, n2, n3)
-            ``g[d][p]`` is the conductance of the face between p and p + e_d.
+        g : array of float64, shape (3, n1, n2, n3)
+            ``g[d][p]`` is the conductance of the face between p and p + e_d (a NumPy
+            ndarray by default, else an array of the namespace of ``classes``).
         """
         if not isinstance(materials, Materials):
             raise ValueError(f"mat: expected a Materials object, got {type(materials).__name__}")
@@ -154,7 +183,7 @@ class FaceGeometry:
             raise ValueError(f"geometry: built for contact={self.contact_model!r}, but the "
                              f"materials use contact={materials.contact!r}; build it with "
                              f"face_geometry(ms, contact={materials.contact!r})")
-        return self.law.conductances(self, materials)
+        return self.law.conductances(self, materials, classes=classes)
 
 
 def self_image_faces(table, pid: np.ndarray, pq: np.ndarray, d: int,
@@ -179,12 +208,82 @@ def self_image_faces(table, pid: np.ndarray, pq: np.ndarray, d: int,
     return cand[np.abs(u_q - u_p - h) > 0.5 * h]
 
 
+def _gather(pid: np.ndarray, mid: np.ndarray, idx: np.ndarray, d: int
+            ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Particle and material ids of p and q = p + e_d at the faces ``idx`` (flat, of p)."""
+    shape = pid.shape
+    ijk = list(np.unravel_index(idx, shape))
+    ijk[d] = (ijk[d] + 1) % shape[d]
+    q = np.ravel_multi_index(tuple(ijk), shape)
+    return pid.ravel()[idx], pid.ravel()[q], mid.ravel()[idx], mid.ravel()[q]
+
+
+def _axis_faces(pid: np.ndarray, mid: np.ndarray, d: int, table, h: float, threads: int
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The interface faces of axis d (flat index of p, sorted): where the particle id changes,
+    and (with a particle table) where a sphere meets its own periodic image; with the
+    particle and material ids of p and q."""
+    idx, p_lo, p_hi, m_lo, m_hi = K.interface_faces(pid, mid, d, threads)
+    if table is None:
+        return idx, p_lo, p_hi, m_lo, m_hi
+    shape = pid.shape
+    if not np.any(2.0 * table.radii_m > shape[d] * h - 2.0 * h):
+        return idx, p_lo, p_hi, m_lo, m_hi  # no sphere can meet its own image
+    extra = self_image_faces(table, pid, np.roll(pid, -1, axis=d), d, shape, h)
+    if extra.size == 0:
+        return idx, p_lo, p_hi, m_lo, m_hi
+    idx = np.union1d(idx, extra)
+    return (idx, *_gather(pid, mid, idx, d))
+
+
+def _image_staircase(pid: np.ndarray, image_smoothing: float) -> list[np.ndarray]:
+    """Central-difference gradient of the Gaussian-smoothed solid indicator, per axis."""
+    solid = scipy.ndimage.gaussian_filter((pid > 0).astype(np.float64), image_smoothing,
+                                          mode="wrap")
+    return [0.5 * (np.roll(solid, -1, axis=a) - np.roll(solid, 1, axis=a)) for a in range(3)]
+
+
+def _unique_contacts(rows: np.ndarray) -> tuple[np.ndarray, ...]:
+    """``np.unique(rows, axis=0, return_index=True, return_inverse=True,
+    return_counts=True)`` of the contact rows (p, q, shift), through one int64 key per row
+    where the rows fit one (the same lexicographic order, first occurrences and counts)."""
+    if rows.shape[0]:
+        lo, hi = rows.min(axis=0), rows.max(axis=0)
+        span = [int(hi[0]) + 1, int(hi[1]) + 1] + [int(hi[k] - lo[k]) + 1 for k in (2, 3, 4)]
+        if min(int(lo[0]), int(lo[1])) >= 0 and math.prod(span) < 2 ** 62:
+            key = rows[:, 0].copy()
+            for k in range(1, 5):
+                key *= span[k]
+                key += rows[:, k] - (lo[k] if k >= 2 else 0)
+            _, first, inverse, counts = np.unique(key, return_index=True, return_inverse=True,
+                                                  return_counts=True)
+            return rows[first], first, inverse.reshape(-1), counts
+    uniq, first, inverse, counts = np.unique(rows, axis=0, return_index=True,
+                                             return_inverse=True, return_counts=True)
+    return uniq, first, inverse.reshape(-1), counts
+
+
+def _contact_pairs(rows: list[np.ndarray], gaps: list[np.ndarray], at: list[np.ndarray],
+                   index: list[np.ndarray]) -> dict[str, Any]:
+    """The contacts of the contact faces: one contact = (particle p, particle q, image shift
+    of q), from the rows ``(p, q, shift)`` and closest gaps of every axis's contact faces
+    ``at[d]`` (positions in ``index[d]``); each face's contact index (-1 off contacts)."""
+    uniq, first, inverse, counts = _unique_contacts(np.concatenate(rows))
+    face_pair, start = [], 0
+    for d in range(3):
+        fp = np.full(index[d].size, -1, dtype=np.int64)
+        fp[at[d]] = inverse[start:start + at[d].size]
+        start += at[d].size
+        face_pair.append(fp)
+    return dict(pair=tuple(face_pair), pair_particles=uniq[:, :2],
+                pair_gap_m=np.concatenate(gaps)[first], pair_faces=counts)
+
 
 def face_geometry(ms: Microstructure, staircase: bool = True,
                   image_smoothing: float = 1.5,
                   touch_gap_m: float = DEFAULT_TOUCH_GAP_M,
-                  contact: str = "gap", interface: str | InterfaceLaw = "staircase"
-                  ) -> FaceGeometry:
+                  contact: str = "gap", interface: str | InterfaceLaw = "staircase",
+                  workers: int | None = None) -> FaceGeometry:
     """Find the interface faces of ``ms`` and their staircase factors.
 
     Parameters
@@ -216,6 +315,10 @@ def face_geometry(ms: Microstructure, staircase: bool = True,
         The interface law (:func:`itr_fv.discrete.interface_law.interface_law`), by name or as an
         object (e.g. ``SegmentLaw(share="normal")``). The segment law needs the particle
         table and ``contact="gap"``; it fills no thin films.
+    workers : int, optional
+        Threads that run the build's numba kernels (default: 1 below 40^3 voxels, else
+        numba's thread count ``NUMBA_NUM_THREADS``; at most the machine's cores). The result
+        does not depend on it.
 
     Returns
     -------
@@ -227,66 +330,45 @@ def face_geometry(ms: Microstructure, staircase: bool = True,
     if law.needs_particles and ms.particles is None:
         raise ValueError(f"interface: the {law.name} law needs the particle table (a "
                          "Microstructure from from_spheres or generate_rve)")
+    threads = K.threads_for(math.prod(ms.shape), workers)
+    with K.using_threads(threads):
+        return _face_geometry(ms, staircase, image_smoothing, touch_gap_m, contact, law,
+                              threads)
+
+
+def _face_geometry(ms: Microstructure, staircase: bool, image_smoothing: float,
+                   touch_gap_m: float, contact: str, law: InterfaceLaw, threads: int
+                   ) -> FaceGeometry:
+    """:func:`face_geometry` once its arguments are checked."""
     shape, h = ms.shape, ms.voxel_m
     pid, mid, filled = law.labels(ms)
-    box = np.array(shape, dtype=np.float64) * h
+    pid, mid = np.ascontiguousarray(pid), np.ascontiguousarray(mid)
     index, lo, hi, is_contact_all, s_all = [], [], [], [], []
-    films, pair_keys, gaps, keys_seen = [], [], [], []
+    films, pair_rows, gaps, contact_at = [], [], [], []
     table = ms.particles
     mode = "off" if not staircase else ("spheres" if table is not None else "image")
-    grad = None
-    if mode == "image" and ms.n_particles:
-        solid = scipy.ndimage.gaussian_filter((pid > 0).astype(np.float64), image_smoothing,
-                                              mode="wrap")
-        grad = [0.5 * (np.roll(solid, -1, axis=a) - np.roll(solid, 1, axis=a)) for a in range(3)]
+    grad = _image_staircase(pid, image_smoothing) if mode == "image" and ms.n_particles \
+        else None
+    if table is not None:
+        centers = np.ascontiguousarray(table.centers_m, dtype=np.float64)
+        radii = np.ascontiguousarray(table.radii_m, dtype=np.float64)
     for d in range(3):
-        pq = np.roll(pid, -1, axis=d)
-        idx = np.flatnonzero((pid != pq).ravel())
-        if table is not None:
-            idx = np.union1d(idx, self_image_faces(table, pid, pq, d, shape, h))
-        p_lo = pid.ravel()[idx]
-        p_hi = pq.ravel()[idx]
+        idx, p_lo, p_hi, m_lo, m_hi = _axis_faces(pid, mid, d, table, h, threads)
         index.append(idx)
-        lo.append(mid.ravel()[idx])
-        hi.append(np.roll(mid, -1, axis=d).ravel()[idx])
-        is_contact = (p_lo > 0) & (p_hi > 0)
-        is_contact_all.append(is_contact)
-        s = np.ones(idx.size)
-        # a sphere touching its own periodic image: the line of centres is e_d, s = 1
-        self_image = is_contact & (p_lo == p_hi)
-        if mode == "spheres" and idx.size:
-            ijk = np.stack(np.unravel_index(idx, shape), axis=1).astype(np.float64)
-            x_face = (ijk + 0.5) * h
-            x_face[:, d] += 0.5 * h
-            pm = ~is_contact
-            part = np.maximum(p_lo, p_hi)[pm] - 1
-            n_pm = min_image(x_face[pm] - table.centers_m[part], box)
-            s[pm] = staircase_factor(n_pm)
-            pp = is_contact & ~self_image
-            if pp.any():
-                a = p_lo[pp] - 1
-                b = p_hi[pp] - 1
-                n_pp = min_image(table.centers_m[b] - table.centers_m[a], box)
-                s[pp] = staircase_factor(n_pp)
+        lo.append(m_lo)
+        hi.append(m_hi)
         if table is not None:
-            film = np.full(idx.size, np.nan)
-            key = np.full(idx.size, -1, dtype=np.int64)
-            gap0 = np.zeros(0)
-            if is_contact.any():
-                ijk = np.stack(np.unravel_index(idx[is_contact], shape), axis=1)
-                x_c = (ijk + 0.5) * h
-                x_c[:, d] += 0.5 * h
-                pa = np.minimum(p_lo, p_hi)[is_contact].astype(np.int64)
-                pb = np.maximum(p_lo, p_hi)[is_contact].astype(np.int64)
-                film[is_contact], gap0, shift = contact_films(table, pa, pb, x_c, d, box)
-                own = pa == pb  # a self-image contact seen from either side is one contact
-                flip = own & (shift[:, d] < 0)
-                shift[flip] *= -1
-                keys_seen.extend(map(tuple, np.column_stack([pa, pb, shift])))
-                key[is_contact] = np.arange(len(keys_seen) - pa.size, len(keys_seen))
+            is_contact, s, film, at, gap, shift = K.sphere_faces(
+                idx, p_lo, p_hi, d, shape, float(h), centers, radii, mode == "spheres", threads)
+            pair_rows.append(np.column_stack([np.minimum(p_lo[at], p_hi[at]).astype(np.int64),
+                                              np.maximum(p_lo[at], p_hi[at]).astype(np.int64),
+                                              shift]))
             films.append(film)
-            pair_keys.append(key)
-            gaps.append(gap0)
+            gaps.append(gap)
+            contact_at.append(at)
+        else:
+            is_contact = (p_lo > 0) & (p_hi > 0)
+            s = np.ones(idx.size)
         if mode == "image" and idx.size:
             pm = np.flatnonzero(~is_contact)
             p_flat = idx[pm]
@@ -296,30 +378,18 @@ def face_geometry(ms: Microstructure, staircase: bool = True,
             n_est = np.stack([0.5 * (grad[a].ravel()[p_flat] + grad[a].ravel()[q_flat])
                               for a in range(3)], axis=1)
             s[pm] = staircase_factor(n_est)
+        is_contact_all.append(is_contact)
         s_all.append(s)
     extra = {}
     if table is not None:
-        # one contact = (particle p, particle q, image shift of q); faces -> contact index
-        rows = np.array(keys_seen, dtype=np.int64).reshape(-1, 5)
-        uniq, first, inverse, counts = np.unique(rows, axis=0, return_index=True,
-                                                 return_inverse=True, return_counts=True)
-        inverse = inverse.reshape(-1)
-        gap_of_row = np.concatenate(gaps) if gaps else np.zeros(0)
-        pairs = uniq[:, :2]
-        face_pair = [np.where(k >= 0, inverse[np.maximum(k, 0)], -1) if inverse.size
-                     else np.full_like(k, -1) for k in pair_keys]
         mat_of_particle = particle_material_ids(ms)
-        extra = dict(
-            film=tuple(films),
-            pair=tuple(face_pair), pair_particles=pairs, pair_gap_m=gap_of_row[first],
-            pair_faces=counts,
-            pair_material_ids=mat_of_particle[pairs].astype(np.int32),
-            touch_gap_m=float(touch_gap_m), filled_voxels=filled,
-            particle_mat=mat_of_particle, **law.law_geometry(ms, staircase=staircase))
+        extra = dict(film=tuple(films), **_contact_pairs(pair_rows, gaps, contact_at, index),
+                     touch_gap_m=float(touch_gap_m), filled_voxels=filled,
+                     particle_mat=mat_of_particle, **law.law_geometry(ms, staircase=staircase))
+        extra["pair_material_ids"] = mat_of_particle[extra["pair_particles"]].astype(np.int32)
     return FaceGeometry(tuple(shape), float(h), tuple(ms.names), mid, tuple(index), tuple(lo),
                         tuple(hi), tuple(is_contact_all), tuple(s_all), mode,
                         contact_model=contact, law=law, **extra)
-
 
 
 def face_conductances(ms: Microstructure, mat: Materials, staircase: bool = True) -> np.ndarray:

@@ -10,6 +10,12 @@ microstructure, so a campaign builds it once per RVE::
     problem = DiscreteProblem(ms, contact="gap")
     for mat in parameter_sets:
         res = itr_fft.homogenize(problem, mat)
+
+The conductances come from the geometry's class arrays
+(:mod:`itr_fv.discrete.face_classes`) by one elementwise pass in any array API namespace:
+``problem.system(mat, xp=xp, device=device)`` gives them where a backend's arrays live
+(the class arrays move there once per problem and namespace/device); NumPy on the host
+is the default.
 """
 
 from __future__ import annotations
@@ -17,6 +23,7 @@ from __future__ import annotations
 import math
 import warnings
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -24,6 +31,7 @@ from ..checks import PhysicalScaleWarning, VoxelContactWarning
 from ..materials.properties import CONTACT_MODELS, Materials
 from ..rve.microstructure import Microstructure
 from .connectivity import FloatingClusters
+from .face_classes import FaceClasses, to_host
 from .interface_law import InterfaceLaw
 from .model import DEFAULT_TOUCH_GAP_M, FaceGeometry, connected_components, face_geometry
 
@@ -41,8 +49,9 @@ class DiscreteSystem:
 
     Attributes
     ----------
-    g : ndarray, shape (3, n1, n2, n3)
-        Face conductances per unit area, W/(m^2 K).
+    g : array, shape (3, n1, n2, n3)
+        Face conductances per unit area, W/(m^2 K): a NumPy ndarray, or an array of the
+        namespace and device :meth:`DiscreteProblem.system` was asked for.
     floating : FloatingClusters
         Clusters cut off by insulating faces.
     labels : ndarray of int32 or None
@@ -53,7 +62,7 @@ class DiscreteSystem:
         which a preconditioner may deflate. None when unknown.
     """
 
-    g: np.ndarray
+    g: Any
     floating: FloatingClusters
     labels: np.ndarray | None
     particle_ids: np.ndarray | None = None
@@ -68,6 +77,14 @@ def floating_clusters(g: np.ndarray) -> tuple[FloatingClusters, np.ndarray | Non
         return FloatingClusters(0, np.zeros(0, dtype=np.int64), 0.0), None
     sizes = np.bincount(labels.ravel(), minlength=n)
     return FloatingClusters(n - 1, sizes[1:], float(sizes[1:].sum() / labels.size)), labels
+
+
+def _floating_clusters_in(xp: Any, g: Any) -> tuple[FloatingClusters, np.ndarray | None]:
+    """:func:`floating_clusters` of conductances of the namespace ``xp``: the check for
+    insulating faces runs where ``g`` lives; only a grid that has some comes to the host."""
+    if bool(xp.all(g > 0)):
+        return FloatingClusters(0, np.zeros(0, dtype=np.int64), 0.0), None
+    return floating_clusters(to_host(g))
 
 
 class DiscreteProblem:
@@ -113,6 +130,12 @@ class DiscreteProblem:
         self.microstructure = ms
         self.geometry = geometry
         self.contact = contact
+        self._classes: dict[tuple[str, str], FaceClasses] = {}
+
+    def __getstate__(self) -> dict:
+        state = dict(self.__dict__)
+        state["_classes"] = {}  # device arrays stay where they are
+        return state
 
     @classmethod
     def for_materials(cls, ms: Microstructure, mat: Materials, staircase: bool = True,
@@ -136,12 +159,49 @@ class DiscreteProblem:
     def voxel_m(self) -> float:
         return self.microstructure.voxel_m
 
-    def system(self, mat: Materials) -> DiscreteSystem:
+    def face_classes(self, *, xp: Any = None, device: Any = None) -> FaceClasses:
+        """The geometry's class arrays in the namespace ``xp`` on ``device``, moved there
+        once per problem and (namespace, device); the host NumPy ones by default."""
+        host = self.geometry.face_classes()
+        if xp is None:
+            if device not in (None, "cpu"):
+                raise ValueError(f"device: {device!r} needs its array namespace xp")
+            return host
+        key = (getattr(xp, "__name__", repr(xp)), repr(device))
+        cache = self.__dict__.setdefault("_classes", {})
+        classes = cache.get(key)
+        if classes is None:
+            classes = cache[key] = host.to(xp, device)
+        return classes
+
+    def conductances(self, mat: Materials, *, xp: Any = None, device: Any = None) -> Any:
+        """Face conductances per unit area of the parameter set ``mat``, W/(m^2 K), shape
+        (3, n1, n2, n3), as an array of ``xp`` on ``device`` (default NumPy on the host)."""
+        if not isinstance(mat, Materials):
+            raise ValueError(f"mat: expected a Materials object, got {type(mat).__name__}")
+        return self.geometry.conductances(mat, classes=self.face_classes(xp=xp, device=device))
+
+    def system(self, mat: Materials, *, xp: Any = None, device: Any = None) -> DiscreteSystem:
         """Face conductances and floating clusters for the parameter set ``mat``.
 
         Warns (:class:`~itr_fv.checks.PhysicalScaleWarning`) for voxels above 1 mm with a
         finite interface resistance, and (:class:`~itr_fv.checks.VoxelContactWarning`) when
         the per-area contact model acts on contact faces.
+
+        Parameters
+        ----------
+        mat : Materials
+            The parameter set, under the problem's contact model.
+        xp : namespace, optional
+            Array API namespace of the conductances (``array_api_strict``,
+            ``array_api_compat.cupy``, ...; default NumPy).
+        device : object, optional
+            Device of ``xp`` for them (default: the namespace's default device).
+
+        Returns
+        -------
+        DiscreteSystem
+            ``g`` in ``xp`` on ``device``; the cluster labels (if any) on the host.
         """
         if not isinstance(mat, Materials):
             raise ValueError(f"mat: expected a Materials object, got {type(mat).__name__}")
@@ -156,8 +216,10 @@ class DiscreteProblem:
                 f"area scales with the voxel ({self.voxel_m * 1e6:.4g} um here): its value "
                 "belongs to the voxel size it was identified at. contact='gap' converges "
                 "under refinement.", VoxelContactWarning, stacklevel=4)
-        g = self.geometry.conductances(mat)
-        floating, labels = floating_clusters(g)
+        classes = self.face_classes(xp=xp, device=device)
+        g = self.geometry.conductances(mat, classes=classes)
+        floating, labels = (floating_clusters(g) if classes.scatter
+                            else _floating_clusters_in(classes.xp, g))
         return DiscreteSystem(g, floating, labels, self.microstructure.particle_ids)
 
     def _warn_scale(self, mat: Materials) -> None:

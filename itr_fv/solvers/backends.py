@@ -12,6 +12,15 @@ checks, the system's face conductances, load vectors, the gauge, the result). A 
   ``solve(b, x0, tol, maxiter, callback)``, written over
   :func:`itr_fv.solvers.krylov.conjugate_gradients`.
 
+A prepared system may keep its arrays on its own device (a GPU): it states where they live
+with the namespace ``xp``, the face conductances ``g`` and the cluster projection
+``clusters`` as it holds them, and ``to_host(array)``. The driver then builds the load
+vectors there (:func:`itr_fv.discrete.operator.load_vector` on ``g``), gets the solution
+there, removes the cluster means and computes the mean flux and the energy tensor there,
+and brings back only the 3x3 tensors (and the fields when asked for). A host backend sets
+none of these: ``g`` None means the system's own host conductances, and ``to_host`` is the
+identity, so every backend runs the same driver lines.
+
 Backends register themselves (:func:`register_backend`) when their module is imported;
 installed packages also announce them under the entry-point group ``itr.backends``
 (``name = "module:Class"``), so the driver finds a backend by name without importing
@@ -28,6 +37,7 @@ from typing import Any
 
 import numpy as np
 
+from ..discrete.connectivity import ClusterProjection
 from ..discrete.problem import DiscreteSystem
 
 __all__ = ["Backend", "PreparedSystem", "LoadCaseSolution", "register_backend",
@@ -46,8 +56,9 @@ class LoadCaseSolution:
 
     Attributes
     ----------
-    x : ndarray, shape (n1, n2, n3), float64
-        theta, K (gauge not yet fixed: the driver removes cluster means).
+    x : array, shape (n1, n2, n3), float64
+        theta, K (gauge not yet fixed: the driver removes cluster means), in the prepared
+        system's namespace and on its device (a host NumPy array for host backends).
     iterations : int
         CG iterations.
     history : list of float
@@ -68,22 +79,44 @@ class LoadCaseSolution:
 
 
 class PreparedSystem(ABC):
-    """One system prepared by a backend; solves its load cases one at a time."""
+    """One system prepared by a backend; solves its load cases one at a time.
+
+    A backend whose arrays live on a device sets ``xp``, ``g`` and ``clusters`` and
+    overrides :meth:`to_host`; a host (NumPy) backend needs none of them.
+    """
 
     #: Facts about the preparation for the result's ``info`` (levels, g_ref, ...).
     info: dict[str, Any]
 
+    #: Array namespace of the prepared system's arrays (NumPy for host backends).
+    xp: Any = np
+
+    #: Face conductances (3, n1, n2, n3), W/(m^2 K), as the prepared system holds them (on
+    #: its device, in its precision); None: the system's host ``g`` (float64).
+    g: Any = None
+
+    #: Projection removing the cluster means, built next to ``g``
+    #: (:class:`~itr_fv.discrete.connectivity.ClusterProjection`); None: the driver builds
+    #: one from the system's labels.
+    clusters: ClusterProjection | None = None
+
+    def to_host(self, x: Any) -> np.ndarray:
+        """A host NumPy array of ``x``, one of the prepared system's arrays (the only way
+        the driver brings a field back; identity for host backends)."""
+        return np.asarray(x)
+
     @abstractmethod
-    def solve(self, b: np.ndarray, x0: np.ndarray | None, tol: float, maxiter: int,
+    def solve(self, b: Any, x0: np.ndarray | None, tol: float, maxiter: int,
               callback: IterationCallback | None = None) -> LoadCaseSolution:
         """Solve A x = b to ``||b - A x|| <= tol ||b||``.
 
         Parameters
         ----------
-        b : ndarray, shape (n1, n2, n3)
-            Load vector, W/m^2 x m (sums to zero on every connected cluster).
+        b : array, shape (n1, n2, n3), float64
+            Load vector, W/m^2 x m (sums to zero on every connected cluster), built by the
+            driver on ``g`` and so in the prepared system's namespace and on its device.
         x0 : ndarray or None
-            Start (theta of a neighbouring solve), K.
+            Start (theta of a neighbouring solve), K, host NumPy.
         tol : float
             Relative residual to reach.
         maxiter : int
@@ -93,7 +126,9 @@ class PreparedSystem(ABC):
         """
 
     def close(self) -> None:
-        """Give back what the preparation holds (threads, device memory)."""
+        """Give back what the preparation holds (threads, device memory); called by the
+        driver after the post-processing, so ``g`` and the solutions stay usable until
+        then."""
 
 
 class Backend(ABC):
@@ -107,6 +142,12 @@ class Backend(ABC):
     @abstractmethod
     def bytes_per_voxel(self) -> int:
         """Measured peak host memory of a solve per voxel, bytes (fields not kept)."""
+
+    def array_namespace(self) -> tuple[Any, Any] | None:
+        """``(xp, device)`` where the backend's arrays live, so the driver builds the face
+        conductances there (:meth:`itr_fv.discrete.problem.DiscreteProblem.system`); None
+        (the default): NumPy on the host."""
+        return None
 
     def device_bytes_per_voxel(self) -> int:
         """Peak memory per voxel a solve holds on an accelerator, bytes (0: its arrays live

@@ -164,16 +164,17 @@ def solvers_for(device: str) -> tuple[str, ...]:
     return tuple(n for n, c in SOLVERS.items() if c.device == device)
 
 
-def solver_choice(choice: str) -> SolverChoice:
+def solver_choice(choice: str, argument: str = "solver") -> SolverChoice:
     """The :class:`SolverChoice` of a resolved name (a registered backend name stands for
-    itself, on the CPU)."""
-    choice = check_solver(choice)
+    itself, on the CPU); a ValueError naming ``argument`` for an unknown one."""
+    choice = check_solver(choice, argument)
     if choice == "auto":
         choice = resolve_solver("auto", "cpu")
     return SOLVERS.get(choice) or SolverChoice(choice, choice)
 
 
-def solver_backend(choice: str, *, threads: int | None = None) -> Backend:
+def solver_backend(choice: str, *, threads: int | None = None,
+                   argument: str = "solver") -> Backend:
     """The backend object of a solver choice.
 
     Parameters
@@ -182,8 +183,10 @@ def solver_backend(choice: str, *, threads: int | None = None) -> Backend:
         A short name, ``"auto"`` or a registered backend name.
     threads : int, optional
         Threads of the numba FFT backend (None: its default for the grid).
+    argument : str
+        The name an error gives the argument.
     """
-    entry = solver_choice(choice)
+    entry = solver_choice(choice, argument)
     options = dict(entry.options)
     if entry.backend == "itr_fft" and threads is not None:
         options["workers"] = threads

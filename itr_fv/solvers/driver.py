@@ -9,6 +9,13 @@ backend (:mod:`itr_fv.solvers.backends`), fixes the gauge and builds the
     from itr_fv.solvers.driver import homogenize
     res = homogenize(problem, mat, backend="itr_fft", tol=1e-8)
     res = homogenize(problem, mat, backend=backend_for("itr_fft", dtype=np.float32), tol=2e-6)
+
+Every stage runs where the backend's arrays live: the load vector is built on the prepared
+system's conductances ``g``, the solution stays where the backend left it, and the cluster
+means, the mean flux and the energy tensor are computed there by the array-API functions
+of :mod:`itr_fv.discrete.operator`; only the 3x3 tensors and, with ``store_fields=True``, the
+fields come back to the host (through the prepared system's ``to_host``). For the NumPy
+backends all of this is host NumPy.
 """
 
 from __future__ import annotations
@@ -17,26 +24,23 @@ import math
 import time
 import warnings
 from collections.abc import Callable, Sequence
+from typing import Any
 
 import numpy as np
 
-from ..discrete.model import (
-    FaceGeometry,
-    cell_centres,
-    energy_tensor,
-    face_fluxes,
-    load_vector,
-    mean_flux,
-)
-from ..discrete.problem import DiscreteProblem
+from ..discrete.connectivity import ClusterProjection
+from ..discrete.model import FaceGeometry
+from ..discrete.operator import cell_centres, effective_tensors, face_fluxes, load_vector
+from ..discrete.problem import DiscreteProblem, DiscreteSystem
 from ..materials.properties import Materials
 from ..rve.microstructure import Microstructure
 from . import resources
-from .backends import Backend, backend_for
+from .backends import Backend, PreparedSystem
+from .choice import DEFAULT_SOLVER, solver_backend
 from .result import ConvergenceError, FloatingClusters, HomogenizationResult
 
 __all__ = ["homogenize", "check_solver_args", "check_x0", "as_problem", "SolveRecord",
-           "build_result", "remove_cluster_means"]
+           "build_result", "remove_cluster_means", "device_arrays"]
 
 Callback = Callable[[int, int, float], None]
 
@@ -101,23 +105,38 @@ def as_problem(ms: Microstructure | DiscreteProblem, mat: Materials, staircase: 
     return DiscreteProblem.for_materials(ms, mat, staircase, geometry)
 
 
-def remove_cluster_means(theta: np.ndarray, labels: np.ndarray | None) -> np.ndarray:
-    """Fix the gauge: zero mean of theta on every connected cluster (in place)."""
-    if labels is None:
-        theta -= theta.mean()
-        return theta
-    flat = labels.ravel()
-    n = int(flat.max()) + 1
-    sums = np.bincount(flat, weights=theta.ravel(), minlength=n)
-    counts = np.bincount(flat, minlength=n)
-    theta -= (sums / counts)[labels]
-    return theta
+def remove_cluster_means(theta: Any, labels: np.ndarray | None) -> Any:
+    """Fix the gauge: zero mean of theta on every connected cluster (in place), where
+    theta lives (:class:`~itr_fv.discrete.connectivity.ClusterProjection`)."""
+    return ClusterProjection(labels, like=theta).project(theta)
+
+
+def device_arrays(prepared: PreparedSystem, system: DiscreteSystem
+                  ) -> tuple[Any, ClusterProjection]:
+    """The face conductances and the cluster projection where the prepared system's arrays
+    live: its own, or the system's host ones for a backend that keeps none."""
+    g = system.g if prepared.g is None else prepared.g
+    clusters = prepared.clusters
+    if clusters is None:
+        clusters = ClusterProjection(system.labels, like=g)
+    return g, clusters
+
+
+def _unit_load(direction: int) -> tuple[float, float, float]:
+    """E = e_direction, K/m."""
+    return tuple(1.0 if d == direction else 0.0 for d in range(3))
+
+
+def _host_float64(a: np.ndarray) -> np.ndarray:
+    """A host field in float64 (itself when it already is)."""
+    return np.asarray(a, dtype=np.float64)
 
 
 class SolveRecord:
-    """What a solver hands over per load case: theta, iterations and residuals."""
+    """What a solver hands over per load case: theta (where the backend's arrays live),
+    iterations and residuals."""
 
-    def __init__(self, direction: int, theta: np.ndarray, iterations: int,
+    def __init__(self, direction: int, theta: Any, iterations: int,
                  history: Sequence[float], residual: float, seconds: float) -> None:
         self.direction = direction
         self.theta = theta
@@ -127,11 +146,28 @@ class SolveRecord:
         self.seconds = seconds
 
 
-def build_result(ms: Microstructure, g: np.ndarray, records: list[SolveRecord], *,
-                 labels: np.ndarray | None, floating: FloatingClusters, tol: float,
+def build_result(ms: Microstructure, g: Any, records: list[SolveRecord], *,
+                 clusters: ClusterProjection, floating: FloatingClusters, tol: float,
                  setup_time: float, wall_time: float, solver: str, store_fields: bool,
-                 strict: bool, info: dict | None = None) -> HomogenizationResult:
+                 strict: bool, info: dict | None = None,
+                 to_host: Callable[[Any], np.ndarray] = np.asarray) -> HomogenizationResult:
     """Turn per-load-case fields into a :class:`HomogenizationResult`.
+
+    The gauge, the mean flux and the energy tensor are computed where ``g`` and the
+    records' theta live; fields come back through ``to_host`` only when ``store_fields``.
+
+    Parameters
+    ----------
+    ms : Microstructure
+        The voxel image (grid, voxel edge).
+    g : array, shape (3, n1, n2, n3)
+        Face conductances, W/(m^2 K), where the thetas live.
+    records : list of SolveRecord
+        One per load case; their theta is gauge-fixed in place.
+    clusters : ClusterProjection
+        The cluster-mean projection next to ``g``.
+    to_host : callable
+        ``to_host(array) -> ndarray``: the prepared system's way to bring a field back.
 
     Raises
     ------
@@ -139,20 +175,18 @@ def build_result(ms: Microstructure, g: np.ndarray, records: list[SolveRecord], 
         If ``strict`` and a load case did not reach ``tol``; otherwise a RuntimeWarning.
     """
     h = ms.voxel_m
-    K = np.full((3, 3), np.nan)
     temps, thetas, fluxes = [], [], []
     for rec in records:
-        E = np.zeros(3)
-        E[rec.direction] = 1.0
-        remove_cluster_means(rec.theta, labels)
-        K[:, rec.direction] = mean_flux(g, rec.theta, h, E)
+        E = _unit_load(rec.direction)
+        clusters.project(rec.theta)
         if store_fields:
-            thetas.append(rec.theta)
-            temps.append(rec.theta - cell_centres(ms.shape, h, rec.direction))
-            fluxes.append(face_fluxes(g, rec.theta, h, E))
+            theta = _host_float64(to_host(rec.theta))
+            thetas.append(theta)
+            temps.append(theta - cell_centres(ms.shape, h, rec.direction))
+            fluxes.append(_host_float64(to_host(face_fluxes(g, rec.theta, h, E))))
     converged = all(rec.residual <= tol for rec in records)
-    K_energy = energy_tensor(g, [rec.theta for rec in records], h,
-                             tuple(rec.direction for rec in records))
+    K, K_energy = effective_tensors(g, [rec.theta for rec in records], h,
+                                    tuple(rec.direction for rec in records))
     result = HomogenizationResult(
         k_eff=K,
         k_eff_energy=K_energy,
@@ -185,7 +219,7 @@ def build_result(ms: Microstructure, g: np.ndarray, records: list[SolveRecord], 
 
 
 def homogenize(problem: Microstructure | DiscreteProblem, mat: Materials, *,
-               backend: str | Backend = "itr_fft", tol: float = 1e-8,
+               backend: str | Backend = DEFAULT_SOLVER, tol: float = 1e-8,
                maxiter: int | None = None, directions: Sequence[int] = (0, 1, 2),
                x0: np.ndarray | None = None, callback: Callback | None = None,
                strict: bool = True, store_fields: bool = True, check_memory: bool = True,
@@ -201,9 +235,11 @@ def homogenize(problem: Microstructure | DiscreteProblem, mat: Materials, *,
     mat : Materials
         Conductivities (W/(m K)) and interface resistances (m^2 K/W).
     backend : str or Backend
-        A registered name (:func:`itr_fv.solvers.backends.available_backends`: ``"itr_fv"`` pyamg,
-        ``"itr_fft"`` numba FFT-PCG, ``"scipy_fft"`` plain scipy FFT-PCG) or a configured
-        backend object (:func:`itr_fv.solvers.backends.backend_for`).
+        A solver choice of :mod:`itr_fv.solvers.choice` (``"fft"``, the default, ``"mg"``,
+        ``"fv"``, ``"gpu"``, ``"auto"``), a registered backend name
+        (:func:`itr_fv.solvers.backends.available_backends`: ``"itr_fv"`` pyamg, ``"itr_fft"``
+        numba FFT-PCG, ``"array_api"``, ``"scipy_fft"``) or a configured backend object
+        (:func:`itr_fv.solvers.backends.backend_for`).
     tol : float
         Relative residual ||b - A theta|| / ||b|| to reach, in (0, 1), checked on the true
         residual.
@@ -238,7 +274,8 @@ def homogenize(problem: Microstructure | DiscreteProblem, mat: Materials, *,
     t0 = time.perf_counter()
     given = problem if isinstance(problem, DiscreteProblem) else None
     ms = given.microstructure if given is not None else problem
-    solver = backend_for(backend)
+    solver = (backend if isinstance(backend, Backend)
+              else solver_backend(backend, argument="backend"))
     tol, maxiter, dirs = check_solver_args(ms, mat, tol, maxiter, directions, callback,
                                            solver.default_maxiter)
     solver.check(ms.shape, tol)
@@ -247,30 +284,31 @@ def homogenize(problem: Microstructure | DiscreteProblem, mat: Materials, *,
         resources.check_memory(ms.shape, solver, store_fields=store_fields,
                                load_cases=len(dirs))
     problem = as_problem(given or ms, mat, staircase, geometry)
-    system = problem.system(mat)
+    where = solver.array_namespace()
+    system = (problem.system(mat) if where is None
+              else problem.system(mat, xp=where[0], device=where[1]))
     prepared = solver.prepare(system, ms.voxel_m)
-    setup = time.perf_counter() - t0
-    records, restarts = [], []
     try:
+        g, clusters = device_arrays(prepared, system)
+        setup = time.perf_counter() - t0
+        records, restarts = [], []
         for c, d in enumerate(dirs):
             t1 = time.perf_counter()
-            E = np.zeros(3)
-            E[d] = 1.0
-            b = load_vector(system.g, ms.voxel_m, E)
+            b = load_vector(g, ms.voxel_m, _unit_load(d))
             step = None if callback is None else (lambda it, res, _d=d: callback(_d, it, res))
             sol = prepared.solve(b, None if x0 is None else x0[c], tol, maxiter, step)
             del b
             restarts.append(sol.restarts)
             records.append(SolveRecord(d, sol.x, sol.iterations, sol.history, sol.residual,
                                        time.perf_counter() - t1))
+        geometry = problem.geometry
+        info = {**prepared.info, "restarts": restarts, "unknowns": int(math.prod(ms.shape)),
+                "interface_faces": geometry.n_interface_faces,
+                "contact_faces": geometry.n_contact_faces, "contact": problem.contact,
+                "staircase": geometry.staircase}
+        return build_result(ms, g, records, clusters=clusters, floating=system.floating,
+                            tol=tol, setup_time=setup, wall_time=time.perf_counter() - t0,
+                            solver=solver.name, store_fields=store_fields, strict=strict,
+                            info=info, to_host=prepared.to_host)
     finally:
         prepared.close()
-    geometry = problem.geometry
-    info = {**prepared.info, "restarts": restarts, "unknowns": int(math.prod(ms.shape)),
-            "interface_faces": geometry.n_interface_faces,
-            "contact_faces": geometry.n_contact_faces, "contact": problem.contact,
-            "staircase": geometry.staircase}
-    return build_result(ms, system.g, records, labels=system.labels, floating=system.floating,
-                        tol=tol, setup_time=setup, wall_time=time.perf_counter() - t0,
-                        solver=solver.name, store_fields=store_fields, strict=strict,
-                        info=info)
