@@ -32,6 +32,7 @@ from typing import Any
 import numpy as np
 
 from itr_fv.discrete.connectivity import ClusterProjection
+from itr_fv.discrete.face_classes import to_host
 from itr_fv.discrete.operator import apply_operator
 from itr_fv.discrete.problem import DiscreteSystem
 from itr_fv.solvers.backends import Backend, LoadCaseSolution, PreparedSystem, register_backend
@@ -145,16 +146,9 @@ def _device_of(xp: Any, name: str, device: str) -> Any:
     return None  # the library's default device
 
 
-def to_numpy(x: Any) -> np.ndarray:
-    """A host NumPy copy (or view) of an array of any supported library."""
-    if isinstance(x, np.ndarray):
-        return x
-    mod = type(x).__module__.split(".")[0]
-    if mod == "cupy":
-        return x.get()
-    if mod == "torch":
-        return x.detach().cpu().numpy()
-    return np.from_dlpack(x)
+#: A host NumPy copy (or view) of an array of any supported library (the package's one
+#: conversion, :func:`itr_fv.discrete.face_classes.to_host`).
+to_numpy = to_host
 
 
 class ArrayAPIOps(ArrayOps):

@@ -41,6 +41,7 @@ import numpy as np
 import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 
+from itr_fv.discrete.face_classes import to_host
 from itr_fv.discrete.operator import apply_operator
 
 from .deflation import group_operator
@@ -79,14 +80,7 @@ def face_stencil(xp: Any, g: Any, x: Any, s: Any | None = None) -> Any:
 
 def _to_host(x: Any) -> np.ndarray:
     """A float64 NumPy copy of a small device array (n_groups values)."""
-    if isinstance(x, np.ndarray):
-        return np.asarray(x, dtype=np.float64)
-    library = type(x).__module__.split(".")[0]
-    if library == "cupy":
-        return np.asarray(x.get(), dtype=np.float64)
-    if library == "torch":
-        return np.asarray(x.detach().cpu().numpy(), dtype=np.float64)
-    return np.asarray(np.from_dlpack(x), dtype=np.float64)
+    return np.asarray(to_host(x), dtype=np.float64)
 
 
 def _float_dtype(xp: Any, dtype: Any, name: str) -> Any:
