@@ -203,14 +203,6 @@ class _Operator:
         apply_operator(self.g, x, out)
 
 
-class _Clusters(ClusterProjection):
-    """:class:`~itr_fv.discrete.connectivity.ClusterProjection` on a device of ``xp`` (the
-    constructor that :mod:`itr_fft.array_api_multigrid`'s tests use)."""
-
-    def __init__(self, xp: Any, device: Any, labels: np.ndarray, dtype: Any) -> None:
-        super().__init__(labels, like=xp.zeros((1,), dtype=dtype, device=device))
-
-
 class _FFTPreconditioner:
     """z = (g_ref L)^+ r by real FFTs in ``fft_dtype``; cluster means removed when there
     are several. With float32 FFTs and float64 vectors, r is rounded to float32 on the

@@ -390,7 +390,7 @@ class ParticleMultigridPreconditioner:
         float64, instead of copied.
     project : callable, optional
         Removes the null space from z in place (e.g. the cluster means of
-        ``array_api_backend._Clusters.project`` when ``DiscreteSystem.labels`` is set).
+        ``ClusterProjection.project`` when ``DiscreteSystem.labels`` is set).
     **options
         Further keyword arguments of :class:`ArrayAPIMultigrid` (sweeps, omega, ...).
     """

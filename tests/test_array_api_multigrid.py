@@ -15,7 +15,7 @@ import importlib.util
 import numpy as np
 import pytest
 
-from itr_fft.array_api_backend import ArrayAPIOps, _Clusters, _cuda_available, _Operator
+from itr_fft.array_api_backend import ArrayAPIOps, _cuda_available, _Operator
 from itr_fft.array_api_multigrid import (
     ArrayAPIDeflation,
     ArrayAPIMultigrid,
@@ -25,6 +25,7 @@ from itr_fft.array_api_multigrid import (
 from itr_fft.deflation import ParticleDeflation
 from itr_fft.multigrid import AggregationMultigrid
 from itr_fft.numba_backend import NumbaFFTBackend
+from itr_fv.discrete.connectivity import ClusterProjection
 from itr_fv.discrete.operator import load_vector
 from itr_fv.discrete.problem import DiscreteProblem
 from itr_fv.solvers.krylov import conjugate_gradients
@@ -146,8 +147,7 @@ def test_cg_takes_the_numba_backends_iterations(case, n, namespace):
     ms, system = _system(case, n)
     tol = 1e-8
     g = xp.asarray(system.g)
-    clusters = None if system.labels is None else _Clusters(xp, None, system.labels,
-                                                            xp.float64)
+    clusters = None if system.labels is None else ClusterProjection(system.labels, like=g)
     project = None if clusters is None else clusters.project
     pre = ParticleMultigridPreconditioner.from_system(xp, system, g_device=g, project=project)
     assert pre.deflation is not None
