@@ -27,6 +27,7 @@ solutions of the earlier load cases (kept for the energy tensor).
 from __future__ import annotations
 
 import math
+import warnings
 from typing import Any
 
 import numpy as np
@@ -229,18 +230,32 @@ class _FFTPreconditioner:
         return z
 
 
-def _use_fused(kernels: str, device: str, namespace: str) -> bool:
-    """Whether the fused kernels of :mod:`itr_fft.fused_kernels` run this solve."""
+def _use_fused(kernels: str, device: str, namespace: str, xp: Any = None) -> bool:
+    """Whether the fused kernels of :mod:`itr_fft.fused_kernels` run this solve: where they
+    are asked for, or for ``"auto"`` on a CUDA device with CuPy arrays, and only where they
+    compile and run there (:func:`~itr_fft.fused_kernels.fused_failure`); ``"auto"`` then
+    takes the portable kernels with a warning, ``"fused"`` is a ValueError saying why."""
     if kernels == "portable":
         return False
-    from .fused_kernels import fused_available
+    from .fused_kernels import fused_available, fused_failure
 
     usable = fused_available() and namespace in ("cupy", "numpy")
     if kernels == "fused" and not usable:
         raise ValueError("kernels: 'fused' needs numba's CUDA target with a CUDA device "
                          "and CuPy arrays (or NUMBA_ENABLE_CUDASIM=1 with NumPy arrays); "
                          "use kernels='portable' or 'auto'")
-    return usable and (kernels == "fused" or (device == "cuda" and namespace == "cupy"))
+    wanted = usable and (kernels == "fused" or (device == "cuda" and namespace == "cupy"))
+    if not wanted or xp is None:
+        return wanted
+    why = fused_failure(xp)
+    if why is None:
+        return True
+    if kernels == "fused":
+        raise ValueError(f"kernels: the fused kernels do not run here ({why}); use "
+                         "kernels='portable' or 'auto'")
+    warnings.warn(f"the fused kernels do not run here ({why}); kernels='auto' uses the "
+                  "portable kernels", RuntimeWarning, stacklevel=3)
+    return False
 
 
 class _Prepared(PreparedSystem):
@@ -257,7 +272,7 @@ class _Prepared(PreparedSystem):
         self.clusters = ClusterProjection(system.labels, like=self.g)
         several = self.clusters.n_clusters > 1
         self._project = self.clusters.project if several else None
-        fused = _use_fused(backend.kernels, device, ns)
+        fused = _use_fused(backend.kernels, device, ns, xp)
         if fused:
             from .fused_kernels import FusedOperator, FusedOps
 

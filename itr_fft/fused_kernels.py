@@ -85,6 +85,33 @@ def fused_available() -> bool:
         return False
 
 
+_PROBED: dict[str, str | None] = {}
+
+
+def fused_failure(xp: Any) -> str | None:
+    """None where the fused kernels compile and run here (one operator apply, a dot, an
+    update and a direction on a 4^3 grid of ``xp``'s arrays, float64; once per namespace);
+    else why not, in one line. A numba whose CUDA target does not build with this NumPy
+    (seen: ``numpy.row_stack`` gone) is caught here, before a solve."""
+    key = getattr(xp, "__name__", str(xp))
+    if key not in _PROBED:
+        try:
+            if not fused_available():
+                raise RuntimeError(_UNAVAILABLE)
+            g = xp.ones((3, 4, 4, 4), dtype=xp.float64)
+            x = xp.ones((4, 4, 4), dtype=xp.float64)
+            out, r, p, q = (xp.zeros((4, 4, 4), dtype=xp.float64) for _ in range(4))
+            FusedOperator(g).apply(x, out)
+            ops = FusedOps()
+            ops.dot(x, x)
+            ops.update(out, r, p, q, 0.5)
+            ops.direction(p, x, 0.5)
+            _PROBED[key] = None
+        except Exception as exc:  # noqa: BLE001 - any failure means: do not use them
+            _PROBED[key] = " ".join(f"{type(exc).__name__}: {exc}".split())[:300]
+    return _PROBED[key]
+
+
 # --------------------------------------------------------------------------- device code
 
 def _index_functions() -> SimpleNamespace:

@@ -24,6 +24,8 @@ starts; an error names the key. The file::
     block_size = 8                 # parameter sets per task (one RVE geometry per task)
     max_diameter_box_ratio = 0.45  # largest particle diameter / box
     min_gap_um = 0.0               # thinnest matrix film between particles, um
+    cut_voxel_um = 0.2             # optional: pack with this voxel's fine-tail cut (the
+                                   # same particles as a campaign at 0.2 um, re-voxelized)
     threads_per_worker = 1         # solver threads in each worker
     matrix = "silicone"
 
@@ -79,12 +81,13 @@ __all__ = ["Campaign", "Formulation", "Task", "CampaignError", "PAPER_BASE", "ne
 PAPER_BASE = paper_data.paper_parameters()
 
 _TOP_KEYS = {"name", "box_um", "voxel_um", "replicas", "seed", "contact", "solver", "tol",
-             "block_size", "max_diameter_box_ratio", "min_gap_um", "threads_per_worker",
-             "matrix", "base", "formulation", "design"}
+             "block_size", "max_diameter_box_ratio", "min_gap_um", "cut_voxel_um",
+             "threads_per_worker", "matrix", "base", "formulation", "design"}
 _DESIGN_KEYS = {"table4": {"kind"}, "grid": {"kind", "values"},
                 "space_filling": {"kind", "n", "seed", "bounds"}}
 #: The file's keys that make its :class:`~itr_fv.rve.spec.RVESpec`.
-_RVE_KEYS = ("box_um", "voxel_um", "seed", "max_diameter_box_ratio", "min_gap_um")
+_RVE_KEYS = ("box_um", "voxel_um", "seed", "max_diameter_box_ratio", "min_gap_um",
+             "cut_voxel_um")
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9.+-]*$")
 
 
@@ -188,6 +191,8 @@ class Campaign:
         d = asdict(self)
         del d["rve"]
         d.update({k: getattr(self.rve, k) for k in _RVE_KEYS})
+        if d["cut_voxel_um"] is None:   # unset: the forms (and fingerprints) of earlier runs
+            del d["cut_voxel_um"]
         d["formulation"] = [{"name": f.name, "fractions": f.fractions,
                              "psd": {k: list(v) for k, v in f.psd.items()}}
                             for f in self.formulations]

@@ -34,8 +34,8 @@ from itr_fv.rve import PackedRVE, build_rve
 from .campaign import Campaign, CampaignError, Task, nearest_solved
 from .store import CampaignStore, rve_id, tensor_columns
 
-__all__ = ["run_campaign", "run_task", "write_task_result", "campaign_rve", "RunSummary",
-           "worker_memory"]
+__all__ = ["run_campaign", "run_task", "run_tasks_here", "write_task_result", "campaign_rve",
+           "RunSummary", "worker_memory"]
 
 
 @dataclass(frozen=True)
@@ -182,7 +182,8 @@ def run_campaign(campaign: Campaign, folder: str | Path, *, workers: int | None 
         Campaign folder (created; must be new or hold this same campaign).
     workers : int, optional
         Workers of the LocalCluster (default: the cores, at most 4; fewer if memory is
-        short). Ignored with ``scheduler``.
+        short); 0: every task in this process, one after the other, without Dask (a
+        machine with one GPU and no Dask). Ignored with ``scheduler``.
     scheduler : str, optional
         Address of a running dask scheduler (``tcp://host:port``) to use instead.
     progress : bool
@@ -203,6 +204,8 @@ def run_campaign(campaign: Campaign, folder: str | Path, *, workers: int | None 
     if not todo:
         echo(f"campaign {campaign.name}: all {len(tasks)} tasks are done; nothing to solve")
         return RunSummary(0, len(tasks), 0, 0, time.perf_counter() - t0, 0)
+    if workers == 0 and scheduler is None:
+        return _run_here(campaign, store, todo, len(tasks), progress, echo, t0)
     client, cluster = _client(workers, scheduler, campaign, echo)
     try:
         n_workers = _ready_workers(client, scheduler, campaign)
@@ -224,6 +227,43 @@ def run_campaign(campaign: Campaign, folder: str | Path, *, workers: int | None 
                          time.perf_counter() - t0, n_workers)
     echo(f"campaign {campaign.name}: {summary.tasks_run} tasks ({solves} solves) in "
          f"{summary.wall_s:.1f} s on {counted(n_workers, 'worker')}; {failed} failed")
+    return summary
+
+
+def run_tasks_here(campaign: Campaign, store: CampaignStore, todo: list[Task], *,
+                   progress: bool = False) -> tuple[int, int, list[str]]:
+    """Run ``todo`` in this process, one task after the other, each task's part written as
+    it finishes (a killed run keeps every finished task); a task's failure is recorded as
+    on a cluster. Returns (solves, failures, the tasks written)."""
+    from tqdm import tqdm
+
+    spec = campaign.to_dict()
+    failed = solves = 0
+    written: list[str] = []
+    for task in tqdm(todo, unit="task", disable=not progress, desc=campaign.name):
+        try:
+            result = run_task(spec, _task_dict(task))
+        except Exception as exc:  # noqa: BLE001 - a task's failure is recorded, not fatal
+            failed += 1
+            store.record_failure(task.task_id, f"{type(exc).__name__}: {exc}")
+            continue
+        write_task_result(store, result)
+        written.append(result["task_id"])
+        solves += result["solves"]
+    return solves, failed, written
+
+
+def _run_here(campaign: Campaign, store: CampaignStore, todo: list[Task], n_tasks: int,
+              progress: bool, echo: Callable, t0: float) -> RunSummary:
+    store.open_for(campaign)
+    store.remove_partial_files()
+    echo(f"campaign {campaign.name}: {len(todo)} of {n_tasks} tasks to run in this process "
+         f"({sum(len(t.set_indices) for t in todo)} solves on {campaign.shape[0]}^3 voxels)")
+    solves, failed, _ = run_tasks_here(campaign, store, todo, progress=progress)
+    summary = RunSummary(len(todo) - failed, n_tasks - len(todo), failed, solves,
+                         time.perf_counter() - t0, 1)
+    echo(f"campaign {campaign.name}: {summary.tasks_run} tasks ({solves} solves) in "
+         f"{summary.wall_s:.1f} s in this process; {failed} failed")
     return summary
 
 

@@ -246,9 +246,10 @@ def test_pyproject_lists_every_package():
     assert len(st["packages"]) == len(set(st["packages"]))
     assert conf["project"]["scripts"]["itr"] == "itr_identify.cli:main"
     # the paper's tables and materials are shipped in itr_fv/data (the bottom layer); the
-    # package's own numerical studies, which the error budget reads, in identify/data
+    # package's own numerical studies, which the error budget reads, and the shipped
+    # faithful corrections in identify/data
     data = conf["tool"]["setuptools"]["package-data"]
     assert data == {"itr_fv": ["data/*.csv", "data/README.md"],
-                    "itr_identify": ["data/*.csv"]}
+                    "itr_identify": ["data/*.csv", "data/*.json"]}
     assert {p.name for p in (ROOT / "itr_fv" / "data").glob("*.csv")} >= {
         "psd_lognormal.csv", "conductivities.csv", "measured_tc.csv"}

@@ -230,3 +230,24 @@ def test_clear_error_where_no_cuda():
 
 if __name__ == "__main__":
     _main()
+
+
+def test_auto_falls_back_to_the_portable_kernels_where_the_fused_ones_do_not_build(
+        monkeypatch):
+    """On the lent H200 (2026-11-26) numba's CUDA target failed to build its kernels with
+    that NumPy (``numpy.row_stack`` gone): ``"auto"`` must then solve with the portable
+    kernels, ``"fused"`` must say why it cannot."""
+    import itr_fft.fused_kernels as fk
+    from itr_fft.array_api_backend import _use_fused
+
+    why = "AttributeError: module 'numpy' has no attribute 'row_stack'"
+    monkeypatch.setattr(fk, "fused_available", lambda: True)
+    monkeypatch.setattr(fk, "fused_failure", lambda xp: why)
+    with pytest.warns(RuntimeWarning, match="row_stack.*portable kernels"):
+        assert _use_fused("auto", "cuda", "cupy", np) is False
+    with pytest.raises(ValueError, match="kernels: the fused kernels do not run here"):
+        _use_fused("fused", "cuda", "cupy", np)
+    assert _use_fused("portable", "cuda", "cupy", np) is False
+    monkeypatch.setattr(fk, "fused_failure", lambda xp: None)
+    assert _use_fused("auto", "cuda", "cupy", np) is True
+    assert _use_fused("auto", "cpu", "numpy", np) is False  # auto: fused on CUDA only

@@ -242,11 +242,11 @@ def test_the_fidelity_caveat_is_said_once_with_its_notation_explained(no_budget)
     lines = headline_lines(head, width=10_000)
     text = _text(lines)
     # once, at the top: indicative, the measured bias, what to run for values to quote
-    assert lines[0].startswith("Fidelity `quick` (the default): indicative values")
+    assert lines[0].startswith("Fidelity `quick`: indicative values")
     assert text.count("--fidelity standard") == 2           # the bias's source, what to run
     assert "gave R_Al2O3_silicone 1.7 times and R_AlN_silicone 2.0 times the `quick` value" \
         in lines[0]
-    assert "run again with `--fidelity standard`" in lines[0]
+    assert "run again at the default `--fidelity shipped`" in lines[0]
     # per value a mark, not a repeated instruction; the x/F notation explained
     caveats = [ln for ln in lines if ln.lstrip().startswith("*")]
     assert len(caveats) == 1 and "x1.95" in caveats[0] and "x/1.34" in caveats[0]
@@ -254,6 +254,6 @@ def test_the_fidelity_caveat_is_said_once_with_its_notation_explained(no_budget)
     assert "x/F is the 90 % interval's half-width as a factor: the interval runs from its " \
            "geometric middle divided by F to its middle times F" in text
     md = _text(headline_markdown(head))
-    assert md.count("run again with `--fidelity standard`") == 1
+    assert md.count("run again at the default `--fidelity shipped`") == 1
     assert "x/F is the 90 % interval's half-width" in md and "x1.95 *" in md
     assert "quote it from a higher --fidelity" not in text + md

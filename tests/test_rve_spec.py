@@ -143,3 +143,14 @@ def test_film_and_psd_basis_are_stated_inputs_of_the_identification():
     t = packed["number"].particles
     _, _, gaps = pairs_within_gap(t.centers_m * 1e6, t.radii_m * 1e6, 12.0, 0.01)
     assert gaps.size and gaps.min() >= 0.002 - 1e-9
+
+
+def test_cut_voxel_is_checked_and_kept_only_where_set():
+    spec = RVESpec(box_um=16.0, voxel_um=0.25)
+    assert spec.min_diameter_voxels == 2.0 and "cut_voxel_um" not in spec.to_dict()
+    fine_cut = spec.with_(cut_voxel_um=0.2)
+    assert fine_cut.min_diameter_voxels == pytest.approx(1.6)   # 0.4 um in 0.25 um voxels
+    assert RVESpec.from_dict(fine_cut.to_dict()) == fine_cut
+    for bad in (0.0, -0.1, "0.2", True):
+        with pytest.raises(ValueError, match="cut_voxel_um"):
+            spec.with_(cut_voxel_um=bad)

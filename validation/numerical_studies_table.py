@@ -3,7 +3,9 @@
 reads (:mod:`itr_identify.reporting.error_budget`).
 
 Reads whatever has finished of ``validation/results/box_size_runs`` (mean k_iso of the two
-packings per box, at the paper's resistances), ``validation/results/inputs_sensitivity_runs``
+packings per box, at the paper's resistances), ``validation/results/box_convergence_runs``
+(56-80 um boxes at 0.25 um for AlN-60 and the hybrid),
+``validation/results/inputs_sensitivity_runs``
 (relative change of k_iso for a 2 and 5 nm film and a volume-weighted Table 1) and
 ``validation/results/voxel_bias_law.json`` (relative bias of the gap model per voxel edge).
 Run it again as the studies land.
@@ -59,6 +61,21 @@ def box_rows() -> list[dict]:
     return sorted(out, key=lambda r: (r["system"], r["box_um"]))
 
 
+def large_box_rows() -> list[dict]:
+    """k_iso per box of the large-box study (56-80 um at 0.25 um, AlN-60 and the hybrid)."""
+    sys.path.insert(0, str(ROOT / "validation"))
+    from box_convergence_study import box_table
+
+    out = []
+    for group, system in (("AlN", "AlN"), ("hybrid", "hybrid")):
+        for box, (k, se, n) in box_table(group).items():
+            out.append({"system": system, "quantity": "k_iso_box_large", "box_um": box,
+                        "voxel_um": 0.25, "value": k, "unit": "W/(m K)",
+                        "source": f"validation/results/box_convergence.md ({n} packings, "
+                                  f"standard error {100 * se / k:.2f} %)"})
+    return out
+
+
 def sensitivity_rows() -> list[dict]:
     runs = RESULTS / "inputs_sensitivity_runs"
     variants = {"film_2nm": "film-2-nm", "film_5nm": "film-5-nm",
@@ -89,7 +106,7 @@ def bias_rows() -> list[dict]:
 
 
 def main() -> int:
-    rows = box_rows() + sensitivity_rows() + bias_rows()
+    rows = box_rows() + large_box_rows() + sensitivity_rows() + bias_rows()
     OUT.parent.mkdir(parents=True, exist_ok=True)
     tmp = OUT.with_suffix(".tmp")
     with tmp.open("w", newline="") as fh:

@@ -8,7 +8,7 @@ again when the run fails; files are written atomically and ``manifest.json`` las
 
 Layout (imports point down only): :mod:`~itr_identify.cli.core` (the error, parser, number
 types, flag names, output folder and the flags several commands share); one module per
-command (``demo``, ``campaign``, ``surrogate``, ``reproduce``, ``identify``,
+command (``demo``, ``campaign``, ``corrections``, ``surrogate``, ``reproduce``, ``identify``,
 ``discrepancy``), each with ``add_parser(sub)``; :mod:`~itr_identify.cli.dispatch`
 (``build_parser`` and ``main``, the console script's entry point).
 """

@@ -287,11 +287,14 @@ def identification_arguments(p: argparse.ArgumentParser) -> None:
                    help="area (the paper's per-area contact resistance), gap (physical "
                    "contacts) or both (default)")
     rve_arguments(p, box="12", voxel="0.25")
-    p.add_argument("--fidelity", choices=["quick", "standard", "paper"], default=None,
-                   help="where the gap parametrisation's models are corrected by full solves: "
-                   "quick (default; none: the 12 um RVE's level, the error budget gives the "
-                   "box and voxel effects), standard (24 um boxes at 0.2 and 0.25 um; 48 min "
-                   "for reproduce on 2 cores), paper (40 um boxes at 0.1 and 0.125 um; hours)")
+    p.add_argument("--fidelity", choices=["shipped", "quick", "standard", "paper"],
+                   default=None,
+                   help="how the gap parametrisation's models are corrected: shipped "
+                   "(default; the corrections shipped with the package, converged boxes, "
+                   "`itr corrections show`; a formulation they do not hold is corrected as "
+                   "at standard), quick (none: the 12 um RVE's level), standard (runtime "
+                   "full solves on 24 um boxes at 0.2 and 0.25 um; 48 min for reproduce on 2 "
+                   "cores), paper (40 um boxes at 0.1 and 0.125 um; hours)")
     engine_arguments(p)
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
 

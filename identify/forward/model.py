@@ -47,7 +47,8 @@ from itr_surrogate.engine import (
 )
 from itr_surrogate.reduced_basis import ReducedBasis
 
-from .fidelity import Correction, FaithfulRVE, direction_scatter
+from .fidelity import CHEAP_REPLICAS, CHEAP_RVE, Correction, FaithfulRVE, direction_scatter
+from .shipped import ShippedCorrections, ShippedFactor
 
 __all__ = ["Parametrisation", "PARAMETRISATIONS", "ForwardSettings", "ForwardModel",
            "full_solve", "MATRIX"]
@@ -206,6 +207,25 @@ def _specs(fractions: Mapping[str, float], basis: str = "number") -> list[Filler
     return [FillerSpec.from_table1(f, v, basis=basis) for f, v in fractions.items()]
 
 
+def shipped_factor(settings: ForwardSettings, parametrisation: Parametrisation,
+                   fractions: Mapping[str, float]) -> tuple[ShippedFactor | None, str]:
+    """The shipped correction of a formulation where ``settings`` ask for it (a faithful RVE
+    with ``shipped``, the gap parametrisation) and it holds (the cheap RVE the corrections
+    were computed for, number-weighted sizes, a studied system and fraction); else None and
+    the reason (empty where the settings do not ask)."""
+    fa = settings.faithful
+    if fa is None or not fa.shipped or parametrisation.contact != "gap":
+        return None, ""
+    if settings.rve != CHEAP_RVE or settings.replicas != CHEAP_REPLICAS:
+        return None, ("the shipped corrections correct the default cheap RVE (12 um at "
+                      "0.25 um, 3 replicas), not this one")
+    if settings.psd_basis != "number":
+        return None, "the shipped corrections hold for number-weighted Table 1 sizes"
+    table = ShippedCorrections.load()
+    factor = table.for_fractions(fractions)
+    return (factor, "") if factor is not None else (None, table.why_not(fractions))
+
+
 def full_solve(ms, materials: Materials, tol: float, *, engine: SolveEngine | None = None,
                solver: str = DEFAULT_SOLVER, **labels) -> np.ndarray:
     """Diagonal of k_eff (3,), W/(m K), of ``ms`` (a packed Microstructure, or its
@@ -247,6 +267,8 @@ class ForwardModel:
     correction: Correction | None = None
     corrections: list[Correction] = field(default_factory=list)  # every round, in order
     faithful_rves: list = field(default_factory=list)   # (RVEData, seed) per faithful packing
+    shipped: ShippedFactor | None = None    # the shipped correction, where it holds
+    shipped_note: str = ""                  # why there is none, where the level asks for it
     build_seconds: float = 0.0
     engine: SolveEngine | None = field(default=None, repr=False, compare=False)
 
@@ -313,6 +335,8 @@ class ForwardModel:
                     [self._request(0, m, purpose="reduced basis", fields=True)])[0])
         ks = self._solve_all(self.centre, purpose="RVE scatter")
         self.replica_k = ks
+        self.shipped, self.shipped_note = shipped_factor(self.settings, self.parametrisation,
+                                                         self.fractions)
         self.build_seconds = time.perf_counter() - t0
         return self
 
@@ -389,6 +413,8 @@ class ForwardModel:
         span beyond them), so that the corrected model is exact at both and repeated
         corrections converge as a secant method."""
         if self.correction is None:
+            if self.shipped is not None:
+                return self.shipped.factor(columns, n)[0]
             return np.ones(n)
         last = self.correction
         if len(self.parameters) == 1 and len(self.corrections) >= 2:
@@ -407,7 +433,11 @@ class ForwardModel:
     @property
     def fidelity_factor(self) -> float:
         """The last faithful correction's factor (:class:`~itr_identify.forward.fidelity.
-        Correction`; 1 without one), at the point it was computed at."""
+        Correction`), at the point it was computed at; the shipped correction's at the
+        anchor; 1 without either."""
+        if self.correction is None and self.shipped is not None:
+            at = self.anchor or self.centre
+            return float(self.shipped.factor({p: np.array([v]) for p, v in at.items()}, 1)[0][0])
         return self.correction.factor if self.correction is not None else 1.0
 
     @property
@@ -416,6 +446,9 @@ class ForwardModel:
         the earlier stages' spread and the faithful correction's uncertainty, in
         quadrature."""
         u = self.correction.relative_sd if self.correction is not None else 0.0
+        if self.correction is None and self.shipped is not None:
+            at = self.anchor or self.centre
+            u = float(self.shipped.factor({p: np.array([v]) for p, v in at.items()}, 1)[1][0])
         return math.hypot(self.carried_scatter, u)
 
     def correct_at(self, values: Mapping[str, float], faithful: FaithfulRVE, *,

@@ -155,8 +155,8 @@ def identify(measurements: Measurements, parametrisation: str = "gap", *,
     if post is not None and faithful is not None:
         t = time.perf_counter()
         echo(f"  {par.name}: faithful corrections of the single-filler models ({faithful.name})")
-        post = _corrected(models, singles, measurements, post, faithful, grid_points, seed,
-                          rounds, echo)
+        post = _corrected(models, _runtime(models, singles, echo), measurements, post,
+                          faithful, grid_points, seed, rounds, echo)
         seconds["single-filler faithful corrections"] = time.perf_counter() - t
     t = time.perf_counter()
     central = post.central() if post is not None else {}
@@ -180,8 +180,8 @@ def identify(measurements: Measurements, parametrisation: str = "gap", *,
     if multis and faithful is not None:
         t = time.perf_counter()
         echo(f"  {par.name}: faithful corrections of the two-filler models ({faithful.name})")
-        post = _corrected(models, multis, measurements, post, faithful, grid_points, seed,
-                          rounds, echo)
+        post = _corrected(models, _runtime(models, multis, echo), measurements, post,
+                          faithful, grid_points, seed, rounds, echo)
         seconds["two-filler faithful corrections"] = time.perf_counter() - t
     t = time.perf_counter()
     echo(f"  {par.name}: the paper's screening (Eq. 4 on its grid)")
@@ -189,6 +189,21 @@ def identify(measurements: Measurements, parametrisation: str = "gap", *,
     seconds["screening"] = time.perf_counter() - t
     return Identification(parametrisation, settings, models, post, screening, seconds,
                           measurements, rounds)
+
+
+def _runtime(models: dict[str, ForwardModel], names: list[str], echo: Callable) -> list[str]:
+    """Those of ``names`` whose models carry no shipped correction (they are corrected at
+    runtime); says why for each that the level asked a shipped correction for."""
+    out = []
+    for f in names:
+        m = models[f]
+        if m.shipped is None:
+            out.append(f)
+            if m.shipped_note:
+                echo(f"  {f}: {m.shipped_note}; corrected at runtime instead")
+        else:
+            echo(f"  {f}: shipped correction x{m.fidelity_factor:.3f} ({m.shipped.system})")
+    return out
 
 
 def _anchored(models: dict[str, ForwardModel], names: list[str], measurements: Measurements,
@@ -223,6 +238,8 @@ def _corrected(models: dict[str, ForwardModel], names: list[str], measurements: 
     stopped moving is not corrected again (the stages are independent: another filler's
     corrections do not move them)."""
     todo = list(names)
+    if not todo:
+        return post
     for r in range(1, faithful.max_rounds + 1):
         t = time.perf_counter()
         own = sorted({p for f in todo for p in models[f].parameters})

@@ -58,14 +58,26 @@ def _system(fillers) -> str:
 
 
 def _box_effect(system: str, box_um: float) -> tuple[float | None, str]:
-    """Relative k_iso of the largest studied box over ``box_um``'s, and how it is known."""
-    boxes = {r["box_um"]: r["value"] for r in numerical_studies()
-             if r["system"] == system and r["quantity"] == "k_iso_box"}
+    """Relative k_iso of the largest studied box over ``box_um``'s, and how it is known:
+    from the large-box study (``k_iso_box_large``, 56-80 um) where it reaches ``box_um``,
+    else from the RVE-size study (``k_iso_box``); the two are not mixed (other voxels)."""
+    def rows(quantity: str) -> dict[float, float]:
+        return {r["box_um"]: r["value"] for r in numerical_studies()
+                if r["system"] == system and r["quantity"] == quantity}
+
+    boxes = rows("k_iso_box_large")
+    if not boxes or box_um < min(boxes):
+        boxes = rows("k_iso_box")
     if not boxes:
         return None, "not studied"
     largest = max(boxes)
     if box_um >= largest:
-        return None, f"not measured: the study's largest box is {largest:g} um"
+        if len(boxes) < 2:
+            return None, f"not measured: the study's largest box is {largest:g} um"
+        prev = max(b for b in boxes if b < largest)
+        return (boxes[largest] / boxes[prev] - 1,
+                f"the last step studied, {prev:g} -> {largest:g} um, as the next one's "
+                "estimate")
     if box_um in boxes:
         return boxes[largest] / boxes[box_um] - 1, f"{box_um:g} -> {largest:g} um"
     smaller = [b for b in boxes if b > box_um]
@@ -90,6 +102,31 @@ def _voxel_bias(voxel_um: float) -> tuple[float | None, str]:
         if math.isclose(h, voxel_um, rel_tol=1e-9):
             return v, "Al2O3-60 bias law"
     return None, "no bias law at this voxel"
+
+
+def _shipped_items(items: dict, m, best: Mapping[str, float]) -> float:
+    """The shipped correction's entries of a formulation's budget; returns its box, um."""
+    fit = m.shipped.fit
+    cols = {p: np.array([best[p]]) for p in m.parameters}
+    c, u = m.shipped.factor(cols, 1)
+    parts = (f"packings +-{100 * fit['packing_sd']:.1f} %, interpolation +-"
+             f"{100 * fit['fit_rms']:.1f} %, voxel extrapolation (bias order) +-"
+             f"{100 * fit['order_sd']:.1f} %")
+    extra = math.sqrt(max(float(u[0]) ** 2 - fit["packing_sd"] ** 2 - fit["fit_rms"] ** 2
+                          - fit["order_sd"] ** 2, 0.0))
+    if extra > 1e-4:
+        parts += f", beyond the design's resistances +-{100 * extra:.1f} %"
+    items["faithful correction (applied)"] = {
+        "value": float(c[0]) - 1, "in_likelihood": False,
+        "basis": f"shipped ({m.shipped.system}): {fit['box_um']:g} um box, voxel bias "
+                 "extrapolated from two voxels, corrections.json"}
+    if "voxel_bias" in fit:
+        items["of it: voxel bias removed (applied)"] = {
+            "value": -fit["voxel_bias"], "in_likelihood": False,
+            "basis": "mean of the shipped points' fine-voxel bias"}
+    items["correction uncertainty"] = {"value": float(u[0]), "in_likelihood": True,
+                                       "basis": parts}
+    return float(fit["box_um"])
 
 
 def _slope(model, best: Mapping[str, float], p: str) -> float:
@@ -138,6 +175,8 @@ def error_budget(ident: Identification) -> dict:
                     "value": corr.relative_sd, "in_likelihood": True,
                     "basis": "faithful packings' scatter and the bias order's uncertainty"}
                 box = corr.box_um
+            elif m.shipped is not None:
+                box = _shipped_items(items, m, best)
             else:
                 bias, basis = _voxel_bias(s.voxel_um)
                 items["voxel bias (not corrected)"] = {

@@ -248,11 +248,24 @@ def fidelity_note(settings, parameters: Mapping[str, object] | None = None,
                     "`--fidelity standard` gave " + " and ".join(
                         f"{n} {r:.1f} times" for n, r in known)
                     + " the `quick` value (validation/results/reproduce_fidelity.md).")
-        return (f"Fidelity `{name}` (the default): indicative values, not for quoting. The "
+        return (f"Fidelity `{name}`: indicative values, not for quoting. The "
                 f"{s.box_um:g} um RVEs at {s.voxel_um:g} um voxels are not corrected for "
                 "their voxel bias or their box." + bias + star + area
-                + " For values to quote, run again with `--fidelity standard` (about 48 min "
-                "on 2 cores for `itr reproduce`).")
+                + " For values to quote, run again at the default `--fidelity shipped` (the "
+                "corrections shipped with the package, same cost) or `--fidelity standard`.")
+    if s.faithful.shipped:
+        from ..forward.shipped import ShippedCorrections
+
+        prov = ShippedCorrections.load().provenance
+        boxes = ", ".join(f"{f} {b:g} um" for f, b in prov["boxes_um"].items())
+        voxels = " and ".join(f"{v:g}" for v in prov["voxels_um"])
+        return (f"Fidelity `{name}` (the default): the gap parametrisation's level is "
+                f"corrected by the corrections shipped with the package (converged boxes: "
+                f"{boxes}; voxel bias extrapolated from {voxels} um; {prov['packings']} "
+                f"packings; {prov['date']}, `itr corrections show`), their uncertainty in "
+                "the intervals; a formulation they do not hold is corrected at runtime on "
+                f"{', '.join(sorted({f'{b:g} um' for _, b in s.faithful.boxes_um}))} boxes."
+                + star + area)
     boxes = ", ".join(f"{f} {b:g} um" for f, b in s.faithful.boxes_um)
     return (f"Fidelity `{name}`: the gap parametrisation's level is corrected on faithful "
             f"RVEs (boxes {boxes}; voxel bias removed by Richardson over "

@@ -679,7 +679,8 @@ def build_rve(spec: RVESpec, fillers: Sequence[FillerSpec] | FillerSpec, replica
             ms = generate_rve(fillers, box_um=spec.box_um, voxel_um=spec.voxel_um, seed=seed,
                               min_gap_um=spec.min_gap_um, matrix=matrix,
                               tail_quantile=spec.tail_quantile,
-                              max_diameter_box_ratio=spec.max_diameter_box_ratio)
+                              max_diameter_box_ratio=spec.max_diameter_box_ratio,
+                              min_diameter_voxels=spec.min_diameter_voxels)
         return PackedRVE(ms, seed)
 
     for seed in retries:

@@ -106,6 +106,12 @@ class RVESpec:
     seed : int
         Packing seed of replica 0; replica ``r`` packs with ``seed + r`` (and, if that
         packing fails, ``seed + r + 100``, ``+ 200``, ...).
+    cut_voxel_um : float, optional
+        The voxel edge whose two-voxel minimum diameter cuts the size distribution's fine
+        tail (None: ``voxel_um``). The cut is the only thing the voxel changes in a
+        packing, so two specifications that differ only in ``voxel_um`` and share
+        ``cut_voxel_um`` hold the same particles, voxelized twice (the pair a voxel-bias
+        extrapolation needs).
     """
 
     box_um: float
@@ -114,6 +120,7 @@ class RVESpec:
     min_gap_um: float = 0.0
     tail_quantile: float = 1e-4
     seed: int = 1
+    cut_voxel_um: float | None = None
 
     def __post_init__(self) -> None:
         voxels_per_edge(self.box_um, self.voxel_um)
@@ -127,6 +134,16 @@ class RVESpec:
             raise ValueError(f"tail_quantile: expected a value in (0, 0.05), got {q!r}")
         if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
             raise ValueError(f"seed: expected a whole number >= 0, got {self.seed!r}")
+        c = self.cut_voxel_um
+        if c is not None and (not _is_number(c) or not c > 0):
+            raise ValueError(f"cut_voxel_um: expected a voxel edge > 0 um or None, got {c!r}")
+
+    @property
+    def min_diameter_voxels(self) -> float:
+        """The fine-tail cut in voxels of :attr:`voxel_um`: two voxels of
+        :attr:`cut_voxel_um` (default: of this voxel)."""
+        cut = self.voxel_um if self.cut_voxel_um is None else self.cut_voxel_um
+        return 2.0 * cut / self.voxel_um
 
     @property
     def n(self) -> int:
@@ -149,8 +166,12 @@ class RVESpec:
         return replace(self, **changes)
 
     def to_dict(self) -> dict[str, Any]:
-        """Plain JSON-able form; ``RVESpec.from_dict(spec.to_dict()) == spec``."""
-        return asdict(self)
+        """Plain JSON-able form; ``RVESpec.from_dict(spec.to_dict()) == spec``
+        (``cut_voxel_um`` only where set: the forms of earlier specifications stay)."""
+        d = asdict(self)
+        if d["cut_voxel_um"] is None:
+            del d["cut_voxel_um"]
+        return d
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> "RVESpec":

@@ -1,0 +1,104 @@
+"""``itr corrections build|show``: make the shipped faithful corrections, or show them.
+
+``build`` runs a corrections file's campaigns (:mod:`itr_identify.forward.correction_plan`)
+on the campaign engine, each in its own sub-folder of ``--out`` (run it again after a kill:
+finished tasks are kept), and writes ``--out/corrections.json``
+(:func:`itr_identify.forward.shipped.assemble`); copy that over
+``identify/data/corrections.json`` to ship it. ``show`` prints a corrections file's table.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from .core import CLIError, Parser, number, solver_arguments, solver_option
+
+__all__ = ["add_parser"]
+
+
+def _build(args: argparse.Namespace) -> int:
+    from itr_fv.io import write_text
+    from itr_surrogate.campaign import CampaignError
+    from itr_surrogate.runner import run_campaign
+
+    from ..forward.correction_plan import CorrectionPlan
+    from ..forward.shipped import assemble
+
+    try:
+        plan = CorrectionPlan.from_toml(args.file)
+        systems = tuple(args.systems.split(",")) if args.systems else None
+        if systems:
+            for s in systems:
+                plan.system(s)
+    except ValueError as exc:
+        raise CLIError(str(exc), 2) from None
+    solver = solver_option(args, plan.solver)
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise CLIError(f"--out: {args.out!r} is a file, not a folder", 2)
+    failed = 0
+    for folder, camp in plan.campaigns(systems=systems, solver=solver, threads=args.threads):
+        try:
+            summary = run_campaign(camp, out / folder, workers=args.workers,
+                                   scheduler=args.scheduler, progress=not args.no_progress)
+        except CampaignError as exc:
+            raise CLIError(str(exc), 2) from None
+        failed += summary.tasks_failed
+    data = assemble(plan, out, provenance={"solver": solver})
+    path = write_text(out / "corrections.json", json.dumps(data, indent=1) + "\n")
+    print(f"wrote {path} ({len(data['points'])} points, systems: "
+          f"{', '.join(data['systems']) or 'none fitted yet'})")
+    return 1 if failed else 0
+
+
+def _show(args: argparse.Namespace) -> int:
+    from ..forward.shipped import ShippedCorrections
+
+    try:
+        table = ShippedCorrections.load(args.file)
+    except (OSError, ValueError) as exc:
+        raise CLIError(f"file: {exc}", 2) from None
+    prov = table.provenance
+    voxels = prov.get("voxels_per_system_um", prov.get("voxels_um"))
+    print(f"corrections {prov.get('plan')} ({prov.get('date')}, commit "
+          f"{str(prov.get('commit'))[:10]}; boxes {prov.get('boxes_um')} um, voxels "
+          f"{voxels} um, packing seeds {prov.get('seeds')})")
+    solver = prov.get("solver")
+    for name, where in (solver.items() if isinstance(solver, dict) else [("all", solver)]):
+        print(f"  solved ({name}): {where}")
+    print(f"{'formulation':<22}{'resistances (m^2 K/W)':<34}{'c':>8}{'packing sd':>12}")
+    for p in table.data["points"]:
+        vals = ", ".join(f"{k.split('_')[1]} {v:.0e}" for k, v in p["values"].items())
+        print(f"{p['formulation']:<22}{vals:<34}{p['c']:>8.4f}{100 * p['packing_sd']:>11.2f}%")
+    for name, s in table.systems.items():
+        lo, hi = s["fraction_range"]
+        print(f"fit {name}: fractions {lo:.3f}-{hi:.3f}, rms {100 * s['fit_rms']:.2f} %")
+    return 0
+
+
+def add_parser(sub) -> None:
+    """Register ``corrections build|show`` on the ``itr`` subparsers ``sub``."""
+    cor = sub.add_parser("corrections", help="the shipped faithful corrections",
+                         description="Build the faithful corrections of a corrections file "
+                         "on the campaign engine, or show a corrections table.")
+    actions = cor.add_subparsers(dest="action", required=True, parser_class=Parser)
+    build = actions.add_parser("build", help="run (or resume) a corrections file")
+    build.add_argument("file", help="corrections file (TOML), e.g. examples/corrections.toml")
+    build.add_argument("--out", required=True, help="run folder (new, or this plan's)")
+    build.add_argument("--systems", default=None,
+                       help="comma-separated systems of the file (default: all)")
+    build.add_argument("--workers", type=number(int, 0, 64, hi_open=False), default=None,
+                       help="workers of the local Dask cluster (0: this process)")
+    build.add_argument("--threads", type=number(int, 1, 64, hi_open=False), default=1,
+                       help="solver threads per worker of the faithful solves")
+    build.add_argument("--scheduler", default=None,
+                       help="address of a running Dask scheduler, e.g. tcp://host:8786")
+    solver_arguments(build)
+    build.add_argument("--no-progress", action="store_true", help="no progress bar")
+    build.set_defaults(func=_build)
+    show = actions.add_parser("show", help="print a corrections table")
+    show.add_argument("file", nargs="?", default=None,
+                      help="corrections.json (default: the one shipped in the package)")
+    show.set_defaults(func=_show)

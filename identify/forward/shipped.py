@@ -1,0 +1,331 @@
+"""Faithful corrections shipped with the package: ``c = k_faithful / k_cheap`` as data.
+
+The factor that takes the cheap RVE's conductivity (:data:`~itr_identify.forward.fidelity.
+CHEAP_RVE`, the level the reduced basis stands for) to the converged box's with the voxel
+bias removed depends on the formulation and weakly on the resistances, not on the
+measurements. It is computed once (:func:`assemble`, from the campaigns of
+:mod:`itr_identify.forward.correction_plan`) and shipped as ``identify/data/corrections.json``
+with its provenance. Per design point and formulation,
+
+    k_0,j = richardson(k_h,j, k_H,j)          (packing j, voxel bias removed, W/(m K))
+    c     = mean_j k_0,j / mean_r k_cheap,r    (dimensionless)
+
+and its standard uncertainty is the packings' (direction-based scatter over sqrt(J)) and
+the bias order's (``p +- 2 se``) in quadrature. Per filler system the factors are fitted by
+
+    c(phi, R) = a + b (phi - phi_0) + sum_i d_i log10(R_i / R_0)
+
+(``phi`` the total filler fraction, ``R_0`` the design's geometric centre): a smooth function
+of the fraction within the studied range, whose residual RMS is the interpolation's
+uncertainty. :class:`ShippedCorrections` gives the factor and its relative standard
+uncertainty for any formulation of a studied system within its fraction range (a hybrid:
+1:1); outside that, None, and the identification falls back to runtime corrections.
+Resistances beyond the design's range take the nearest design value's factor, and the
+fitted slope over the distance is added to the uncertainty.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import json
+import math
+import subprocess
+from collections.abc import Mapping
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from .correction_plan import CorrectionPlan
+from .fidelity import (
+    BIAS_ORDER,
+    BIAS_ORDER_SE,
+    CHEAP_REPLICAS,
+    CHEAP_RVE,
+    CHEAP_TOL,
+    direction_scatter,
+    richardson,
+)
+
+__all__ = ["ShippedCorrections", "ShippedFactor", "assemble", "point_rows", "SHIPPED_FILE"]
+
+SHIPPED_FILE = "corrections.json"
+#: How far a hybrid may be from 1:1 (difference of the two fractions) and still use the 1:1
+#: fit, volume fraction.
+HYBRID_TOLERANCE = 0.005
+
+
+def _rows(folder: Path) -> list[dict]:
+    """A campaign store's rows, or where there is none the rows of ``<folder>.rows.json``
+    (rows kept without their store, e.g. read back from a device run's log)."""
+    from itr_surrogate.store import CampaignStore
+
+    if (folder / "campaign.json").is_file():
+        return CampaignStore(folder).results().to_pylist()
+    loose = folder.with_name(folder.name + ".rows.json")
+    return json.loads(loose.read_text()) if loose.is_file() else []
+
+
+def _diagonal(row: Mapping) -> np.ndarray:
+    """(k_xx, k_yy, k_zz) of a row; NaN where only k_iso was kept."""
+    if row.get("k_xx") is None:
+        return np.full(3, np.nan)
+    return np.array([row["k_xx"], row["k_yy"], row["k_zz"]], dtype=np.float64)
+
+
+def _packing_sd(k0: np.ndarray, k0_iso: np.ndarray) -> float:
+    """Relative standard error of the packings' mean k_iso: from the diagonal entries where
+    kept (:func:`direction_scatter`), else from the packings' k_iso alone."""
+    if np.all(np.isfinite(k0)):
+        return direction_scatter(k0) / math.sqrt(len(k0))
+    return float(k0_iso.std(ddof=1) / k0_iso.mean() / math.sqrt(len(k0_iso)))
+
+
+def _key(row: Mapping, names: list[str]) -> tuple:
+    return (row["formulation"],) + tuple(round(float(row[n]) * 1e12) for n in names)
+
+
+def point_rows(plan: CorrectionPlan, folder: str | Path, system: str) -> list[dict]:
+    """The assembled design points of one system from its campaign stores under ``folder``
+    (only points whose every packing is solved at both voxels and whose cheap replicas are
+    all solved): formulation, fractions, resistances, k_cheap, per-packing k at both
+    voxels, the extrapolated k_0, c and its uncertainties."""
+    s = plan.system(system)
+    names = sorted(s.values)
+    sub = plan.folders(system)
+    group: dict[str, dict[tuple, dict[int, tuple[np.ndarray, float]]]] = {}
+    for which in sub:
+        group[which] = {}
+        for r in _rows(Path(folder) / sub[which]):
+            group[which].setdefault(_key(r, names), {})[int(r["replica"])] = (
+                _diagonal(r), float(r["k_iso"]))
+    if "only" in sub:
+        return _one_voxel_points(plan, folder, s, names, group)
+    coarse_v, fine_v = plan.voxels_of(system)
+    out = []
+    for key, coarse in sorted(group["coarse"].items()):
+        fine, cheap = group["fine"].get(key, {}), group["cheap"].get(key, {})
+        packs = sorted(set(coarse) & set(fine))
+        if len(packs) < plan.packings or len(cheap) < CHEAP_REPLICAS:
+            continue
+        kf = np.array([fine[j][1] for j in packs])      # k_iso per packing
+        kc = np.array([coarse[j][1] for j in packs])
+        ratio = coarse_v / fine_v
+        k0 = richardson(kf, kc, ratio, BIAS_ORDER)
+        k0_diag = richardson(np.array([fine[j][0] for j in packs]),
+                             np.array([coarse[j][0] for j in packs]), ratio, BIAS_ORDER)
+        k_cheap = float(np.mean([cheap[r][1] for r in sorted(cheap)]))
+        k_faithful = float(k0.mean())
+        lo, hi = (richardson(kf, kc, ratio, BIAS_ORDER + d).mean()
+                  for d in (-2 * BIAS_ORDER_SE, 2 * BIAS_ORDER_SE))
+        u_order = abs(hi - lo) / 2 / k_faithful
+        out.append({"formulation": key[0], "fractions": _fractions(key[0]),
+                    "values": {n: v / 1e12 for n, v in zip(names, key[1:])},
+                    "k_cheap": k_cheap, "k_fine_iso": kf.tolist(), "k_coarse_iso": kc.tolist(),
+                    "k_faithful_iso": k0.tolist(), "k_faithful": k_faithful,
+                    "c": k_faithful / k_cheap, "packing_sd": _packing_sd(k0_diag, k0),
+                    "order_sd": u_order, "voxel_bias": float(kf.mean() / k_faithful - 1),
+                    "voxel_bias_coarse": float(kc.mean() / k_faithful - 1)})
+    return out
+
+
+def _one_voxel_points(plan: CorrectionPlan, folder: str | Path, s, names: list[str],
+                      group: dict) -> list[dict]:
+    """Points of a system solved at one voxel: each packing's k over ``1 + b``, ``b`` the
+    mean voxel bias of the ``bias_from`` systems at that voxel (each at its own filler's
+    resistance of the point; the mean over that system's fractions), its uncertainty half
+    their spread and their bias orders' in quadrature."""
+    voxel = plan.voxels_of(s.name)[0]
+    biases: dict[str, dict[float, list[tuple[float, float]]]] = {}
+    for b in s.bias_from:
+        (param,) = plan.system(b).values
+        key = "voxel_bias_coarse" if voxel == plan.voxels_of(b)[0] else "voxel_bias"
+        for p in point_rows(plan, folder, b):
+            biases.setdefault(param, {}).setdefault(round(p["values"][param] * 1e12), []).append(
+                (p[key], p["order_sd"]))
+    out = []
+    for key, only in sorted(group["only"].items()):
+        cheap = group["cheap"].get(key, {})
+        packs = sorted(only)
+        values = {n: v / 1e12 for n, v in zip(names, key[1:])}
+        per = [biases.get(n, {}).get(round(values[n] * 1e12)) for n in names]
+        if len(packs) < plan.packings or len(cheap) < CHEAP_REPLICAS or any(
+                not x for x in per):
+            continue
+        b_each = [float(np.mean([b for b, _ in x])) for x in per]
+        bias = float(np.mean(b_each))
+        u_bias = math.hypot((max(b_each) - min(b_each)) / 2,
+                            float(np.mean([u for x in per for _, u in x])))
+        kv = np.array([only[j][1] for j in packs])
+        k0 = kv / (1 + bias)
+        k0_diag = np.array([only[j][0] for j in packs]) / (1 + bias)
+        k_cheap = float(np.mean([cheap[r][1] for r in sorted(cheap)]))
+        k_faithful = float(k0.mean())
+        out.append({"formulation": key[0], "fractions": _fractions(key[0]), "values": values,
+                    "k_cheap": k_cheap, "k_voxel_iso": kv.tolist(), "voxel_um": voxel,
+                    "k_faithful_iso": k0.tolist(), "k_faithful": k_faithful,
+                    "c": k_faithful / k_cheap, "packing_sd": _packing_sd(k0_diag, k0),
+                    "order_sd": u_bias, "voxel_bias": bias,
+                    "voxel_bias_from": dict(zip(s.bias_from, b_each))})
+    return out
+
+
+def _fractions(name: str) -> dict[str, float]:
+    from itr_fv.materials.formulation_names import fractions_of
+
+    return fractions_of(name)
+
+
+def _design(points: list[dict], names: list[str]) -> tuple[np.ndarray, float, dict]:
+    phi = np.array([sum(p["fractions"].values()) for p in points])
+    phi0 = float(np.round(phi.mean(), 4))
+    centre = {n: math.sqrt(min(p["values"][n] for p in points)
+                           * max(p["values"][n] for p in points)) for n in names}
+    cols = [np.ones_like(phi), phi - phi0] + [
+        np.log10(np.array([p["values"][n] for p in points]) / centre[n]) for n in names]
+    return np.column_stack(cols), phi0, centre
+
+
+def fit_system(points: list[dict], names: list[str]) -> dict[str, Any]:
+    """Least-squares fit of ``c(phi, R)`` to a system's points (see the module docstring);
+    a linear trend in the fraction needs two fractions at least."""
+    fractions = sorted({round(sum(p["fractions"].values()), 6) for p in points})
+    if len(fractions) < 2:
+        raise ValueError(f"points: a fit over the fraction needs two fractions, got "
+                         f"{fractions}")
+    X, phi0, centre = _design(points, names)
+    y = np.array([p["c"] for p in points])
+    coef, *_ = np.linalg.lstsq(X, y, rcond=None)
+    resid = y - X @ coef
+    dof = max(len(y) - X.shape[1], 1)
+    return {"parameters": names, "phi0": phi0, "R0": centre,
+            "coefficients": coef.tolist(), "fit_rms": float(math.sqrt(resid @ resid / dof)),
+            "fraction_range": [fractions[0], fractions[-1]],
+            "R_range": {n: [min(p["values"][n] for p in points),
+                            max(p["values"][n] for p in points)] for n in names},
+            "packing_sd": float(np.sqrt(np.mean([p["packing_sd"] ** 2 for p in points]))),
+            "order_sd": float(np.sqrt(np.mean([p["order_sd"] ** 2 for p in points]))),
+            "voxel_bias": float(np.mean([p["voxel_bias"] for p in points])),
+            "max_residual": float(np.abs(resid).max())}
+
+
+def _commit() -> str:
+    try:
+        return subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True,
+                              cwd=Path(__file__).resolve().parent, check=True).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+
+
+def assemble(plan: CorrectionPlan, folder: str | Path, *,
+             provenance: Mapping[str, Any] | None = None) -> dict[str, Any]:
+    """The shipped file's content from the finished campaigns of ``plan`` under ``folder``:
+    every point, a fit per system (systems with points of two fractions at least) and the
+    provenance (commit, date, boxes, voxels, seeds, solver, cheap RVE; ``provenance`` adds or
+    replaces entries, e.g. where each campaign was solved)."""
+    systems, points = {}, []
+    for s in plan.systems:
+        pts = point_rows(plan, folder, s.name)
+        for p in pts:
+            p["system"] = s.name
+        points += pts
+        try:
+            systems[s.name] = {"fillers": sorted(pts[0]["fractions"]) if pts else [],
+                               "box_um": s.box_um, **fit_system(pts, sorted(s.values))}
+        except (ValueError, IndexError):
+            continue
+    prov = {"plan": plan.name, "commit": _commit(),
+            "date": _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%d"),
+            "boxes_um": {s.name: s.box_um for s in plan.systems},
+            "voxels_um": list(plan.voxels_um), "packings": plan.packings,
+            "seeds": [plan.seed + j for j in range(plan.packings)], "solver": plan.solver,
+            "tol": plan.tol, "bias_order": BIAS_ORDER, "bias_order_se": BIAS_ORDER_SE,
+            "cheap_rve": {**CHEAP_RVE.to_dict(), "replicas": CHEAP_REPLICAS,
+                          "seeds": [CHEAP_RVE.seed + r for r in range(CHEAP_REPLICAS)],
+                          "tol": CHEAP_TOL},
+            **dict(provenance or {})}
+    return {"provenance": prov, "systems": systems, "points": points}
+
+
+@dataclass(frozen=True)
+class ShippedFactor:
+    """The shipped correction of one formulation: :meth:`factor` per row of resistances."""
+
+    system: str
+    fraction: float
+    fit: dict[str, Any]
+
+    def factor(self, columns: Mapping[str, np.ndarray], n: int) -> tuple[np.ndarray,
+                                                                         np.ndarray]:
+        """(c, relative standard uncertainty), each (n,), for ``{name: values}`` columns
+        (m^2 K/W; a parameter not given sits at the design's centre)."""
+        f = self.fit
+        coef = np.asarray(f["coefficients"])
+        c = np.full(n, coef[0] + coef[1] * (self.fraction - f["phi0"]))
+        extra = np.zeros(n)
+        for i, name in enumerate(f["parameters"]):
+            lo, hi = f["R_range"][name]
+            v = np.broadcast_to(np.asarray(columns.get(name, f["R0"][name]), float), (n,))
+            x = np.log10(np.clip(v, lo, hi) / f["R0"][name])
+            c = c + coef[2 + i] * x
+            beyond = np.abs(np.log10(np.clip(v, lo, hi) / v))
+            extra = np.hypot(extra, coef[2 + i] * beyond)
+        u = math.sqrt(f["fit_rms"] ** 2 + f["packing_sd"] ** 2 + f["order_sd"] ** 2)
+        return c, np.hypot(u, extra / np.maximum(c, 1e-12))
+
+
+class ShippedCorrections:
+    """The corrections file: per filler system a fit of ``c(phi, R)`` and its range."""
+
+    def __init__(self, data: Mapping[str, Any]) -> None:
+        if "systems" not in data or "provenance" not in data:
+            raise ValueError("data: expected a corrections file with 'systems' and "
+                             "'provenance'")
+        self.data = dict(data)
+
+    @classmethod
+    def load(cls, path: str | Path | None = None) -> "ShippedCorrections":
+        """The file at ``path`` (default: the one shipped in the package)."""
+        if path is None:
+            text = resources.files("itr_identify").joinpath("data", SHIPPED_FILE).read_text()
+        else:
+            text = Path(path).read_text()
+        return cls(json.loads(text))
+
+    @property
+    def provenance(self) -> dict[str, Any]:
+        return dict(self.data["provenance"])
+
+    @property
+    def systems(self) -> dict[str, dict[str, Any]]:
+        return dict(self.data["systems"])
+
+    def for_fractions(self, fractions: Mapping[str, float]) -> ShippedFactor | None:
+        """The correction of a formulation (filler -> volume fraction), or None where it is
+        outside every studied system's range (another filler set, a hybrid not 1:1, a total
+        fraction outside the studied one)."""
+        fillers = sorted(fractions)
+        total = float(sum(fractions.values()))
+        if len(fillers) == 2 and abs(fractions[fillers[0]] - fractions[fillers[1]]) > \
+                HYBRID_TOLERANCE:
+            return None
+        for name, s in self.systems.items():
+            lo, hi = s["fraction_range"]
+            if s["fillers"] == fillers and lo - 1e-9 <= total <= hi + 1e-9:
+                return ShippedFactor(name, total, s)
+        return None
+
+    def why_not(self, fractions: Mapping[str, float]) -> str:
+        """One line: why a formulation has no shipped correction."""
+        fillers = sorted(fractions)
+        known = {n: s for n, s in self.systems.items() if s["fillers"] == fillers}
+        if not known:
+            return f"no shipped correction for the fillers {'+'.join(fillers)}"
+        if len(fillers) == 2:
+            return "the shipped hybrid corrections hold for 1:1 hybrids only"
+        s = next(iter(known.values()))
+        lo, hi = s["fraction_range"]
+        return (f"total filler fraction {sum(fractions.values()):.3f} outside the studied "
+                f"{lo:.2f}-{hi:.2f}")
