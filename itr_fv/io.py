@@ -95,6 +95,20 @@ def write_text(path: str | os.PathLike, text: str) -> Path:
     return final
 
 
+def read_toml(path: str | os.PathLike, what: str) -> dict:
+    """The table of a TOML file (a byte-order mark is fine); a ValueError naming the file
+    when it is missing (``no such <what>``) or not TOML."""
+    import tomllib
+
+    p = Path(path)
+    try:
+        return tomllib.loads(p.read_text(encoding="utf-8-sig"))
+    except FileNotFoundError:
+        raise ValueError(f"{p}: no such {what}") from None
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise ValueError(f"{p}: not valid TOML ({exc})") from None
+
+
 def sha256(path: str | os.PathLike) -> str:
     """Hex SHA-256 of a file's content."""
     h = hashlib.sha256()

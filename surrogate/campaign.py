@@ -58,7 +58,6 @@ import hashlib
 import json
 import math
 import re
-import tomllib
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
@@ -66,6 +65,7 @@ from typing import Any
 import numpy as np
 
 from itr_fv import Materials
+from itr_fv.io import read_toml
 from itr_fv.materials import paper_data
 from itr_fv.materials.formulation_names import UnknownFormulationError, formulation_name
 from itr_fv.materials.paper_data import PAPER_SYSTEM, TABLE1
@@ -152,11 +152,9 @@ class Campaign:
         """Read and check a campaign file (CampaignError naming the file and key)."""
         p = Path(path)
         try:
-            data = tomllib.loads(p.read_text(encoding="utf-8-sig"))  # a BOM is fine
-        except FileNotFoundError:
-            raise CampaignError(f"{p}: no such campaign file") from None
-        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-            raise CampaignError(f"{p}: not valid TOML ({exc})") from None
+            data = read_toml(p, "campaign file")
+        except ValueError as exc:
+            raise CampaignError(str(exc)) from None
         try:
             return cls.from_dict(data)
         except CampaignError as exc:

@@ -145,6 +145,13 @@ def test_the_assembled_table_fits_and_answers_only_within_its_range(tiny_run):
     # beyond the design's resistances: the nearest design value's factor, a larger
     # uncertainty
     assert c[2] == pytest.approx(c[1], rel=1e-12) and u[2] >= u[1]
+    # a formulation the table holds takes its own factors (its cheap replicas are the ones
+    # they were computed for), without the fit's residual
+    own = table.for_fractions({"Al2O3": 0.60})
+    c_own, u_own = own.factor({"R_Al2O3_silicone": np.array([1e-8, 5e-8])}, 2)
+    np.testing.assert_allclose(c_own, [at["Al2O3-60", 1e-8], at["Al2O3-60", 5e-8]],
+                               rtol=1e-12)
+    assert np.all(u_own <= u[:2])
     assert table.for_fractions({"Al2O3": 0.50}) is None
     assert "outside the studied 0.55-0.60" in table.why_not({"Al2O3": 0.50})
     assert table.for_fractions({"AlN": 0.60}) is None
@@ -233,3 +240,26 @@ def test_default_identification_applies_the_shipped_corrections_and_agrees_with_
     item = budget["formulations"]["Al2O3-60"]["items"]["correction uncertainty"]
     assert item["in_likelihood"] and 0 < item["value"] < 0.02
     assert "interpolation" in item["basis"]
+
+
+def test_itr_corrections_build_and_show_on_a_tiny_plan(tmp_path, capsys):
+    from itr_identify.cli.dispatch import main
+
+    plan = tmp_path / "tiny.toml"
+    plan.write_text('name = "tiny"\nvoxels_um = [0.5, 0.25]\npacking = 2\n')
+    assert main(["corrections", "build", str(plan), "--out", str(tmp_path / "run")]) == 2
+    assert "unknown key 'packing'" in capsys.readouterr().err
+    plan.write_text(
+        'name = "tiny"\nvoxels_um = [0.5, 0.25]\npackings = 2\nsolver = "fft"\n'
+        '[[system]]\nname = "Al2O3"\nbox_um = 6.0\nformulations = ["Al2O3-55", "Al2O3-60"]\n'
+        'values = { R_Al2O3_silicone = [1e-8, 5e-8] }\n')
+    out = tmp_path / "run"
+    assert main(["corrections", "build", str(plan), "--out", str(out), "--workers", "0",
+                 "--no-progress"]) == 0
+    data = json.loads((out / "corrections.json").read_text())
+    assert len(data["points"]) == 4 and set(data["systems"]) == {"Al2O3"}
+    assert data["provenance"]["solver"] == "fft"
+    capsys.readouterr()
+    assert main(["corrections", "show", str(out / "corrections.json")]) == 0
+    shown = capsys.readouterr().out
+    assert "Al2O3-60" in shown and "fit Al2O3: fractions 0.550-0.600" in shown

@@ -66,7 +66,8 @@ def add_parser(sub) -> None:
     run = actions.add_parser("run", help="run (or resume) a campaign file")
     run.add_argument("file", help="campaign file (TOML)")
     run.add_argument("--out", required=True, help="campaign folder (new, or this campaign's)")
-    run.add_argument("--workers", type=number(int, 0, 64, hi_open=False), default=None,
+    run.add_argument("--workers", type=number(int, 0, 64, lo_open=False, hi_open=False),
+                     default=None,
                      help="workers of the local Dask cluster (default: cores, at most 4; "
                           "0: every task in this process, without Dask)")
     run.add_argument("--scheduler", default=None,

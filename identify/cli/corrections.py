@@ -89,7 +89,8 @@ def add_parser(sub) -> None:
     build.add_argument("--out", required=True, help="run folder (new, or this plan's)")
     build.add_argument("--systems", default=None,
                        help="comma-separated systems of the file (default: all)")
-    build.add_argument("--workers", type=number(int, 0, 64, hi_open=False), default=None,
+    build.add_argument("--workers", type=number(int, 0, 64, lo_open=False, hi_open=False),
+                       default=None,
                        help="workers of the local Dask cluster (0: this process)")
     build.add_argument("--threads", type=number(int, 1, 64, hi_open=False), default=1,
                        help="solver threads per worker of the faithful solves")

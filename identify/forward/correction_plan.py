@@ -34,11 +34,11 @@ The file::
 
 from __future__ import annotations
 
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from itr_fv.io import read_toml
 from itr_fv.rve.spec import RVESpec
 from itr_fv.solvers.choice import DEFAULT_SOLVER, check_solver
 from itr_surrogate.campaign import Campaign
@@ -83,12 +83,7 @@ class CorrectionPlan:
     def from_toml(cls, path: str | Path) -> "CorrectionPlan":
         """Read and check a corrections file (ValueError naming the file and key)."""
         p = Path(path)
-        try:
-            data = tomllib.loads(p.read_text(encoding="utf-8-sig"))
-        except FileNotFoundError:
-            raise ValueError(f"{p}: no such corrections file") from None
-        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-            raise ValueError(f"{p}: not valid TOML ({exc})") from None
+        data = read_toml(p, "corrections file")
         try:
             return cls.from_dict(data)
         except ValueError as exc:

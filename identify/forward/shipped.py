@@ -49,7 +49,8 @@ from .fidelity import (
     richardson,
 )
 
-__all__ = ["ShippedCorrections", "ShippedFactor", "assemble", "point_rows", "SHIPPED_FILE"]
+__all__ = ["ShippedCorrections", "ShippedFactor", "assemble", "campaign_rows", "point_rows",
+           "SHIPPED_FILE"]
 
 SHIPPED_FILE = "corrections.json"
 #: How far a hybrid may be from 1:1 (difference of the two fractions) and still use the 1:1
@@ -57,13 +58,14 @@ SHIPPED_FILE = "corrections.json"
 HYBRID_TOLERANCE = 0.005
 
 
-def _rows(folder: Path) -> list[dict]:
+def campaign_rows(folder: Path) -> list[dict]:
     """A campaign store's rows, or where there is none the rows of ``<folder>.rows.json``
     (rows kept without their store, e.g. read back from a device run's log)."""
     from itr_surrogate.store import CampaignStore
 
     if (folder / "campaign.json").is_file():
-        return CampaignStore(folder).results().to_pylist()
+        store = CampaignStore(folder)
+        return store.results().to_pylist() if store.done_tasks() else []
     loose = folder.with_name(folder.name + ".rows.json")
     return json.loads(loose.read_text()) if loose.is_file() else []
 
@@ -98,7 +100,7 @@ def point_rows(plan: CorrectionPlan, folder: str | Path, system: str) -> list[di
     group: dict[str, dict[tuple, dict[int, tuple[np.ndarray, float]]]] = {}
     for which in sub:
         group[which] = {}
-        for r in _rows(Path(folder) / sub[which]):
+        for r in campaign_rows(Path(folder) / sub[which]):
             group[which].setdefault(_key(r, names), {})[int(r["replica"])] = (
                 _diagonal(r), float(r["k_iso"]))
     if "only" in sub:
@@ -256,24 +258,61 @@ class ShippedFactor:
     system: str
     fraction: float
     fit: dict[str, Any]
+    own: tuple[dict, ...] = ()
+
+    def _columns(self, columns: Mapping[str, np.ndarray], n: int) -> tuple[list, np.ndarray]:
+        """Per parameter log10(R / R0) clipped into the design's range, and the distance
+        beyond it (log10)."""
+        f = self.fit
+        xs, beyond = [], []
+        for name in f["parameters"]:
+            lo, hi = f["R_range"][name]
+            v = np.broadcast_to(np.asarray(columns.get(name, f["R0"][name]), float), (n,))
+            xs.append(np.log10(np.clip(v, lo, hi) / f["R0"][name]))
+            beyond.append(np.abs(np.log10(np.clip(v, lo, hi) / v)))
+        return xs, np.array(beyond).reshape(len(xs), n)
 
     def factor(self, columns: Mapping[str, np.ndarray], n: int) -> tuple[np.ndarray,
                                                                          np.ndarray]:
         """(c, relative standard uncertainty), each (n,), for ``{name: values}`` columns
-        (m^2 K/W; a parameter not given sits at the design's centre)."""
+        (m^2 K/W; a parameter not given sits at the design's centre).
+
+        A formulation the table holds (:attr:`own`, its design points) takes its own
+        factors, interpolated in log10 R (linear; bilinear for two resistances), with the
+        packings' and the bias order's uncertainty: its cheap replicas are the ones the
+        factors were computed for. Any other takes the system's fit at its fraction, with
+        the fit's residual added."""
         f = self.fit
-        coef = np.asarray(f["coefficients"])
-        c = np.full(n, coef[0] + coef[1] * (self.fraction - f["phi0"]))
-        extra = np.zeros(n)
-        for i, name in enumerate(f["parameters"]):
-            lo, hi = f["R_range"][name]
-            v = np.broadcast_to(np.asarray(columns.get(name, f["R0"][name]), float), (n,))
-            x = np.log10(np.clip(v, lo, hi) / f["R0"][name])
-            c = c + coef[2 + i] * x
-            beyond = np.abs(np.log10(np.clip(v, lo, hi) / v))
-            extra = np.hypot(extra, coef[2 + i] * beyond)
-        u = math.sqrt(f["fit_rms"] ** 2 + f["packing_sd"] ** 2 + f["order_sd"] ** 2)
+        xs, beyond = self._columns(columns, n)
+        if self.own:
+            _, coef = _local_fit(self.own, f)
+            c = coef[0] + sum(coef[1 + i] * x for i, x in enumerate(xs))
+            if len(xs) == 2:
+                c = c + coef[3] * xs[0] * xs[1]
+            slopes = np.abs(coef[1:1 + len(xs)])
+            u = math.sqrt(np.mean([p["packing_sd"] ** 2 + p["order_sd"] ** 2
+                                   for p in self.own]))
+        else:
+            coef = np.asarray(f["coefficients"])
+            c = coef[0] + coef[1] * (self.fraction - f["phi0"]) + sum(
+                coef[2 + i] * x for i, x in enumerate(xs))
+            slopes = np.abs(coef[2:])
+            u = math.sqrt(f["fit_rms"] ** 2 + f["packing_sd"] ** 2 + f["order_sd"] ** 2)
+        c = np.broadcast_to(np.asarray(c, dtype=np.float64), (n,)).copy()
+        extra = np.sqrt(np.sum((slopes[:, None] * beyond) ** 2, axis=0))
         return c, np.hypot(u, extra / np.maximum(c, 1e-12))
+
+
+def _local_fit(points: tuple[dict, ...], fit: Mapping[str, Any]) -> tuple[np.ndarray,
+                                                                          np.ndarray]:
+    """Coefficients of ``c = a + sum_i d_i x_i (+ e x_1 x_2)`` through one formulation's
+    design points (``x_i = log10(R_i / R0_i)``): exact on a 2-point line or a 2 x 2 grid."""
+    names = fit["parameters"]
+    xs = [np.log10(np.array([p["values"][n] for p in points]) / fit["R0"][n]) for n in names]
+    cols = [np.ones(len(points)), *xs] + ([xs[0] * xs[1]] if len(xs) == 2 else [])
+    X = np.column_stack(cols)
+    coef, *_ = np.linalg.lstsq(X, np.array([p["c"] for p in points]), rcond=None)
+    return X, coef
 
 
 class ShippedCorrections:
@@ -314,7 +353,13 @@ class ShippedCorrections:
         for name, s in self.systems.items():
             lo, hi = s["fraction_range"]
             if s["fillers"] == fillers and lo - 1e-9 <= total <= hi + 1e-9:
-                return ShippedFactor(name, total, s)
+                own = tuple(p for p in self.data["points"] if p.get("system") == name
+                            and sorted(p["fractions"]) == fillers
+                            and all(abs(p["fractions"][f] - fractions[f]) < 1e-9
+                                    for f in fillers))
+                n_grid = math.prod(1 + (s["R_range"][q][1] > s["R_range"][q][0])
+                                   for q in s["parameters"])
+                return ShippedFactor(name, total, s, own if len(own) >= n_grid else ())
         return None
 
     def why_not(self, fractions: Mapping[str, float]) -> str:

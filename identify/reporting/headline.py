@@ -296,6 +296,8 @@ def headline(idents: Mapping[str, Identification]) -> dict:
                 s, {p: tuple(i.posterior.names) for p, i in idents.items()}, marked),
             "holds_at": f"{s.box_um:g} um box, {s.voxel_um:g} um voxels"
                         + ("" if s.faithful is None else
+                           ", corrected to converged boxes by the shipped corrections"
+                           if s.faithful.shipped else
                            f", corrected on faithful RVEs ({fidelity})"),
             "parameters": params}
 
