@@ -128,7 +128,8 @@ def point_rows(plan: CorrectionPlan, folder: str | Path, system: str) -> list[di
                     "k_cheap": k_cheap, "k_fine_iso": kf.tolist(), "k_coarse_iso": kc.tolist(),
                     "k_faithful_iso": k0.tolist(), "k_faithful": k_faithful,
                     "c": k_faithful / k_cheap, "packing_sd": _packing_sd(k0_diag, k0),
-                    "order_sd": u_order, "voxel_bias": float(kf.mean() / k_faithful - 1),
+                    "order_sd": u_order, "cheap_sd": _cheap_sd(cheap),
+                    "voxel_bias": float(kf.mean() / k_faithful - 1),
                     "voxel_bias_coarse": float(kc.mean() / k_faithful - 1)})
     return out
 
@@ -169,9 +170,15 @@ def _one_voxel_points(plan: CorrectionPlan, folder: str | Path, s, names: list[s
                     "k_cheap": k_cheap, "k_voxel_iso": kv.tolist(), "voxel_um": voxel,
                     "k_faithful_iso": k0.tolist(), "k_faithful": k_faithful,
                     "c": k_faithful / k_cheap, "packing_sd": _packing_sd(k0_diag, k0),
-                    "order_sd": u_bias, "voxel_bias": bias,
+                    "order_sd": u_bias, "cheap_sd": _cheap_sd(cheap), "voxel_bias": bias,
                     "voxel_bias_from": dict(zip(s.bias_from, b_each))})
     return out
+
+
+def _cheap_sd(cheap: Mapping[int, tuple[np.ndarray, float]]) -> float:
+    """Relative standard error of the cheap replicas' mean k_iso."""
+    k = np.array([cheap[r][1] for r in sorted(cheap)])
+    return float(k.std(ddof=1) / k.mean() / math.sqrt(len(k)))
 
 
 def _fractions(name: str) -> dict[str, float]:
@@ -210,6 +217,7 @@ def fit_system(points: list[dict], names: list[str]) -> dict[str, Any]:
             "packing_sd": float(np.sqrt(np.mean([p["packing_sd"] ** 2 for p in points]))),
             "order_sd": float(np.sqrt(np.mean([p["order_sd"] ** 2 for p in points]))),
             "voxel_bias": float(np.mean([p["voxel_bias"] for p in points])),
+            "cheap_sd": float(np.sqrt(np.mean([p["cheap_sd"] ** 2 for p in points]))),
             "max_residual": float(np.abs(resid).max())}
 
 
@@ -281,7 +289,7 @@ class ShippedFactor:
         factors, interpolated in log10 R (linear; bilinear for two resistances), with the
         packings' and the bias order's uncertainty: its cheap replicas are the ones the
         factors were computed for. Any other takes the system's fit at its fraction, with
-        the fit's residual added."""
+        the fit's residual (at least the cheap replicas' scatter of their mean) added."""
         f = self.fit
         xs, beyond = self._columns(columns, n)
         if self.own:
@@ -297,7 +305,11 @@ class ShippedFactor:
             c = coef[0] + coef[1] * (self.fraction - f["phi0"]) + sum(
                 coef[2 + i] * x for i, x in enumerate(xs))
             slopes = np.abs(coef[2:])
-            u = math.sqrt(f["fit_rms"] ** 2 + f["packing_sd"] ** 2 + f["order_sd"] ** 2)
+            # another formulation's cheap replicas are other packings: their mean's scatter
+            # is part of the interpolation's error (the fit's residual holds it only where
+            # the system has more fractions than the fit has terms)
+            interp = max(f["fit_rms"], f.get("cheap_sd", 0.0))
+            u = math.sqrt(interp ** 2 + f["packing_sd"] ** 2 + f["order_sd"] ** 2)
         c = np.broadcast_to(np.asarray(c, dtype=np.float64), (n,)).copy()
         extra = np.sqrt(np.sum((slopes[:, None] * beyond) ** 2, axis=0))
         return c, np.hypot(u, extra / np.maximum(c, 1e-12))
