@@ -436,9 +436,15 @@ class ForwardModel:
         Correction`), at the point it was computed at; the shipped correction's at the
         anchor; 1 without either."""
         if self.correction is None and self.shipped is not None:
-            at = self.anchor or self.centre
-            return float(self.shipped.factor({p: np.array([v]) for p, v in at.items()}, 1)[0][0])
+            return self._shipped_at_anchor()[0]
         return self.correction.factor if self.correction is not None else 1.0
+
+    def _shipped_at_anchor(self) -> tuple[float, float]:
+        """The shipped correction's factor and relative uncertainty at the anchor (the box
+        centre before it)."""
+        at = self.anchor or self.centre
+        c, u = self.shipped.factor({p: np.array([v]) for p, v in at.items()}, 1)
+        return float(c[0]), float(u[0])
 
     @property
     def model_sd(self) -> float:
@@ -447,8 +453,7 @@ class ForwardModel:
         quadrature."""
         u = self.correction.relative_sd if self.correction is not None else 0.0
         if self.correction is None and self.shipped is not None:
-            at = self.anchor or self.centre
-            u = float(self.shipped.factor({p: np.array([v]) for p, v in at.items()}, 1)[1][0])
+            u = self._shipped_at_anchor()[1]
         return math.hypot(self.carried_scatter, u)
 
     def correct_at(self, values: Mapping[str, float], faithful: FaithfulRVE, *,
