@@ -98,10 +98,13 @@ def test_noise_alone_names_nothing(tables, thickness):
 
 
 @pytest.mark.slow
-def test_without_thicknesses_the_tester_candidate_is_not_tried(tables):
+def test_without_thicknesses_the_tester_candidate_is_fitted_at_the_assumed_thickness(tables):
     d = find_discrepancy(measure(), settings=SETTINGS, tables=tables)
-    assert fx.TesterContact().name in d.skipped
-    assert len(d.candidates) == 2
+    assert not d.skipped
+    assert len(d.candidates) == 3
+    tester = next(m for m in d.candidates if m.name == fx.TesterContact().name)
+    assert d.verdict != "named"
+    assert tester.interval[0] <= tester.parameters["R_contact_m2K_per_W"] <= tester.interval[1]
 
 
 @pytest.mark.slow
@@ -248,10 +251,12 @@ def test_discrepancy_bad_invocations_fail_in_one_line(tmp_path, capsys, args, ex
 
 @pytest.mark.slow
 def test_the_whole_library_names_three_effects():
-    """All six candidates at once: matrix conductivity, contact spots and the tester's
+    """The seven candidates of issue 13 at once: matrix conductivity, contact spots and the tester's
     contact resistance are each named; filler conductivity, porosity and the filler
     fraction are absorbed by the resistances at these fractions (no discrepancy)."""
-    tables = build_tables({f: fractions_of(f) for f in FORMS}, settings=SETTINGS)
+    tables = build_tables({f: fractions_of(f) for f in FORMS}, settings=SETTINGS,
+                          effects=fx.by_key(["matrix", "filler", "porosity", "fraction",
+                                             "spots", "tester", "batch"]))
     for effect, value, thickness in ((fx.MatrixConductivity(), 0.30, False),
                                      (fx.ContactSpots(), 3e-6, False),
                                      (fx.TesterContact(), 4e-5, True)):
@@ -328,9 +333,11 @@ def test_a_thickness_trend_supports_the_tester_candidate_below_the_bic_margin():
     tester = ModelFit(fx.TesterContact().name, {"R_Al2O3_silicone": 2e-8,
                                                 fx.TesterContact().parameter: 1e-5},
                       (5e-6, 1.5e-5), measured + rng.normal(0, 0.004, measured.size),
-                      np.full(measured.size, 1e-4), 0.0, 9.0, 100.0, 2)
+                      np.full(measured.size, 1e-4), 0.0, 9.0, 100.0, 2,
+                      n_observations=measured.size)
     base = ModelFit("base", {"R_Al2O3_silicone": 2e-8}, None, flat,
-                    np.full(measured.size, 1e-4), 0.0, 30.0, 103.0, 1)
+                    np.full(measured.size, 1e-4), 0.0, 30.0, 103.0, 1,
+                    n_observations=measured.size)
     assert thickness_trend(groups, base)[2] < 1e-3 < thickness_trend(groups, tester)[2]
     d = Discrepancy("none", "", groups, base, [tester], {}, 1e-4, [], [],
                     [fx.TesterContact()])

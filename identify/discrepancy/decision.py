@@ -5,7 +5,6 @@ verdict (:func:`find_discrepancy`)."""
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
 
 import numpy as np
 from scipy import stats
@@ -13,88 +12,17 @@ from scipy import stats
 from ..forward.model import MATRIX
 from ..inference.formulations import fractions_of
 from ..inference.measurements import Measurements
+from .deciding import rank_measurements, tied_set
 from .effects import Effect
 from .fit import Group, ModelFit, fit_model, groups_of
-from .model_form import AMPLITUDE_RANGE, LeaveOneOut, ModelFormFit, fit_model_form, leave_one_out
+from .model_form import AMPLITUDE_RANGE, fit_model_form, leave_one_out
+from .observables import auxiliary_groups
+from .outcome import Discrepancy
 from .settings import DiscrepancySettings
 from .tables import ForwardTables, build_tables
 
 __all__ = ["Discrepancy", "find_discrepancy", "residual_structure", "resistance_remarks",
            "thickness_trend"]
-
-
-@dataclass
-class Discrepancy:
-    """Outcome of the workflow.
-
-    Attributes
-    ----------
-    verdict : {"none", "named", "tie", "unexplained"}
-    statement : str
-        One paragraph: what the data say.
-    groups : list of Group
-    base : ModelFit
-    candidates : list of ModelFit
-        Ranked by BIC, best first.
-    skipped : dict of str to str
-        Candidates not tried, with the reason.
-    p_value_base : float
-        Chi-square test of the base model's residuals.
-    structure : list of str
-        The residuals' trends (filler fraction, filler type, thickness).
-    left_out : list of str
-        Formulations not used (two-filler).
-    model_form : ModelFormFit or None
-        The base model with the model-form term (:mod:`itr_identify.discrepancy.model_form`),
-        calibrated when no candidate is named.
-    leave_one_out : dict of str to LeaveOneOut
-        With the model-form term: each formulation predicted from the others by the base
-        model alone (``"base"``) and with the term (``"model-form"``).
-    """
-
-    verdict: str
-    statement: str
-    groups: list[Group]
-    base: ModelFit
-    candidates: list[ModelFit]
-    skipped: dict[str, str]
-    p_value_base: float
-    structure: list[str]
-    left_out: list[str]
-    effects: list[Effect]
-    winner: ModelFit | None = None
-    tables: ForwardTables | None = None
-    model_form: ModelFormFit | None = None
-    leave_one_out: dict[str, LeaveOneOut] | None = None
-
-    def p_value(self, fit: ModelFit) -> float:
-        return float(stats.chi2.sf(fit.chi_square, fit.dof(len(self.groups))))
-
-    def chi_square_per_dof(self, fit: ModelFit) -> float:
-        return fit.chi_square / fit.dof(len(self.groups))
-
-    def to_dict(self) -> dict:
-        def fit_dict(m: ModelFit) -> dict:
-            return {"name": m.name, "parameters": m.parameters,
-                    "interval_90": list(m.interval) if m.interval else None,
-                    "chi_square": m.chi_square, "dof": m.dof(len(self.groups)),
-                    "p_value": self.p_value(m), "bic": m.bic,
-                    "delta_bic": self.base.bic - m.bic,
-                    "predicted": m.predicted.tolist(), "at_grid_edge": m.at_grid_edge}
-        return {"verdict": self.verdict, "statement": self.statement,
-                "groups": [{"label": g.label, "formulation": g.formulation,
-                            "thickness_m": g.thickness_m, "measured": g.mean,
-                            "standard_error": g.standard_error, "n": g.n}
-                           for g in self.groups],
-                "base": fit_dict(self.base), "candidates": [fit_dict(c) for c in self.candidates],
-                "skipped": self.skipped, "structure": self.structure,
-                "left_out": self.left_out,
-                "effects": [e.describe() for e in self.effects],
-                "model_form": self.model_form.to_dict() if self.model_form else None,
-                "leave_one_out": ({k: v.to_dict() for k, v in self.leave_one_out.items()}
-                                  if self.leave_one_out else None),
-                "corrections": ({f: c.to_dict() for f, c in self.tables.corrections.items()}
-                                if self.tables is not None else {})}
 
 
 def residual_structure(groups: Sequence[Group], fit: ModelFit) -> list[str]:
@@ -165,7 +93,8 @@ def find_discrepancy(measurements: Measurements, *,
                      settings: DiscrepancySettings | None = None,
                      effects: Sequence[Effect] | None = None,
                      tables: ForwardTables | None = None,
-                     tick: Callable[[], None] | None = None) -> Discrepancy:
+                     tick: Callable[[], None] | None = None,
+                     correct: Callable[["Discrepancy"], None] | None = None) -> Discrepancy:
     """Run the workflow on a measurement table.
 
     Parameters
@@ -182,6 +111,10 @@ def find_discrepancy(measurements: Measurements, *,
         when not given.
     tick : callable, optional
         Called after every full solve.
+    correct : callable, optional
+        ``correct(d)`` refits candidates with their table level corrected at their best
+        point (:func:`itr_identify.discrepancy.best_point.corrector`; it makes full
+        solves); None: every candidate keeps the base model's correction.
     """
     settings = settings or DiscrepancySettings()
     comps = {f: fractions_of(f) for f in measurements.formulations}
@@ -197,20 +130,24 @@ def find_discrepancy(measurements: Measurements, *,
         raise ValueError(f"tables: no forward table for {missing}")
     effects = list(tables.effects if effects is None else effects)
     groups = groups_of(measurements, comps)
-    base = fit_model(tables, groups, None)
+    aux = auxiliary_groups(measurements, comps)
+    base = fit_model(tables, groups, None, aux)
     skipped, fits = {}, []
-    have_thickness = all(g.thickness_m is not None for g in groups)
     for e in effects:
-        if e.needs_thickness and not (have_thickness
-                                      and len({g.thickness_m for g in groups}) >= 2):
-            skipped[e.name] = "needs measurements at two thicknesses or more"
-            continue
-        fits.append(fit_model(tables, groups, e))
+        fits.append(fit_model(tables, groups, e, aux))
     fits.sort(key=lambda m: m.bic)
     out = Discrepancy("none", "", groups, base, fits, skipped,
-                      float(stats.chi2.sf(base.chi_square, base.dof(len(groups)))),
-                      residual_structure(groups, base), left_out, effects, None, tables)
+                      float(stats.chi2.sf(base.chi_square, base.dof())),
+                      residual_structure(groups, base), left_out, effects, None, tables,
+                      aux=aux, densities=settings.system.densities(
+                          sorted({g.filler for g in groups})))
+    if settings.correct_at_best and correct is not None:
+        correct(out)
     _decide(out, settings)
+    out.tied = tied_set(out, settings)
+    if len(out.tied) >= 2:
+        out.deciding = rank_measurements(out, settings, measurements)
+        _say_tied(out, settings)
     if out.verdict != "named":
         _add_model_form(out)
     return out
@@ -279,9 +216,8 @@ def _physical(e: Effect, value: float) -> bool:
 
 
 def _decide(d: Discrepancy, st: DiscrepancySettings) -> None:
-    n = len(d.groups)
     significant = d.p_value_base < st.significance
-    base_line = (f"Base model: chi-square {d.base.chi_square:.1f} on {d.base.dof(n)} degrees "
+    base_line = (f"Base model: chi-square {d.base.chi_square:.1f} on {d.base.dof()} degrees "
                  f"of freedom (p = {d.p_value_base:.2g}): the residuals are "
                  f"{'significant' if significant else 'consistent with the noise'}.")
     remarks = resistance_remarks(d.base, st)
@@ -361,3 +297,27 @@ def _decide(d: Discrepancy, st: DiscrepancySettings) -> None:
     else:
         d.verdict = "named"
         d.statement = base_line + f" Named: {named}."
+
+
+def _say_tied(d: Discrepancy, st: DiscrepancySettings) -> None:
+    """Add the tied set and the measurement that would decide it to the statement."""
+    names = ", ".join(_model_words(m, d) for m in d.tied)
+    text = f" The data do not tell apart: {names}."
+    scale = [e for e in d.effects if e.scales_resistance]
+    if scale:
+        text += (" Not in that set, as no measurement of k, density or mass fraction can "
+                 "tell it from the resistances: " + "; ".join(
+                     f"{e.name} (what would: {e.separate_by})" for e in scale) + ".")
+    if d.deciding:
+        best = d.deciding[0]
+        text += " " + best.sentence()
+    d.statement += text
+
+
+def _model_words(m: ModelFit, d: Discrepancy) -> str:
+    if m.name == "base":
+        return "no effect (the base model)"
+    e = next(e for e in d.effects if e.name == m.name)
+    lo, hi = m.interval
+    return (f"{m.name} ({e.parameter} {m.parameters[e.parameter]:.3g}, 90 % "
+            f"{lo:.3g} - {hi:.3g})")

@@ -28,6 +28,9 @@ from itr_fv import Materials, Microstructure
 from itr_fv.analytic import maxwell_garnett
 from itr_fv.materials.paper_data import PAPER_SYSTEM
 
+from .effect import Effect
+from .steepening import STEEPENING_EFFECTS
+
 __all__ = ["Effect", "MatrixConductivity", "FillerConductivity", "Porosity",
            "FillerFraction", "ContactSpots", "TesterContact", "BatchFraction",
            "default_effects", "by_key",
@@ -35,100 +38,6 @@ __all__ = ["Effect", "MatrixConductivity", "FillerConductivity", "Porosity",
 
 #: Conductivity of the air in voids, W/(m K).
 AIR_CONDUCTIVITY = 0.026
-
-
-@dataclass(frozen=True)
-class Effect:
-    """One candidate effect (a base class: each subclass overrides one of
-    :meth:`materials`, :meth:`microstructure`, :meth:`apparent`).
-
-    Attributes
-    ----------
-    key : str
-        Short name (command line: ``--effects``).
-    name : str
-    parameter : str
-        Name of its parameter (with the unit in it).
-    nominal : float
-        The value at which the model is the base model.
-    values : tuple of float
-        Grid on which the full model is solved (the nominal value among them); the
-        workflow interpolates between them and does not extrapolate.
-    signature : str
-        The pattern it leaves in the residuals.
-    separate_by : str
-        The measurement that tells it apart from the effects of the same signature.
-    kind : {"material", "geometry", "measurement", "variance"}
-    log_scale : bool
-        Interpolate (and calibrate) in the logarithm of the parameter.
-    physical_range : (float, float) or None
-        Where the parameter is physically expected, where narrower than the grid: a fit
-        outside it is reported and not named (None: the grid is that range).
-    """
-
-    key: str
-    name: str
-    parameter: str
-    nominal: float
-    values: tuple[float, ...]
-    signature: str
-    separate_by: str
-    kind: str = "material"
-    log_scale: bool = False
-    physical_range: tuple[float, float] | None = None
-
-    def __post_init__(self) -> None:
-        v = np.asarray(self.values, dtype=float)
-        if v.size < 3 or np.any(np.diff(v) <= 0) or not np.all(np.isfinite(v)):
-            raise ValueError(f"values: the grid of {self.name!r} must hold at least 3 finite, "
-                             f"increasing values, got {self.values!r}")
-        if not v[0] <= self.nominal <= v[-1]:
-            raise ValueError(f"nominal: {self.nominal!r} lies outside the grid of "
-                             f"{self.name!r} ({v[0]!r}..{v[-1]!r})")
-
-    @property
-    def needs_thickness(self) -> bool:
-        """Whether the effect can only be seen in measurements at several thicknesses."""
-        return False
-
-    @property
-    def solved(self) -> bool:
-        """Whether its values need full solves (it changes the RVE or its phases)."""
-        return self.kind in ("material", "geometry")
-
-    def formulation_sd(self, slope: np.ndarray, value: np.ndarray) -> np.ndarray:
-        """Relative standard deviation of an error shared by one formulation's
-        measurements, from ``slope`` = d ln k / d phi of the model at that formulation
-        (phi a volume fraction) and the effect's ``value`` (default: none)."""
-        return np.zeros(np.broadcast(slope, value).shape)
-
-    def materials(self, base: Materials, value: float) -> Materials:
-        """Phase values under the effect (default: unchanged)."""
-        return base
-
-    def materials_in(self, microstructure: Microstructure, base: Materials,
-                     value: float) -> Materials:
-        """Phase values under the effect in ``microstructure`` (default:
-        :meth:`materials`; an effect whose phase values depend on the RVE's composition
-        overrides this)."""
-        return self.materials(base, value)
-
-    def microstructure(self, base: Microstructure, value: float, seed: int) -> Microstructure:
-        """The RVE under the effect (default: unchanged)."""
-        return base
-
-    def apparent(self, k: np.ndarray, thickness_m: np.ndarray, value: float) -> np.ndarray:
-        """The conductivity the tester reports for a sample of conductivity ``k``
-        (default: ``k``)."""
-        return k
-
-    def describe(self) -> dict:
-        return {"key": self.key, "name": self.name, "parameter": self.parameter,
-                "nominal": self.nominal,
-                "grid": list(self.values), "kind": self.kind, "signature": self.signature,
-                "physical_range": (list(self.physical_range) if self.physical_range
-                                   else None),
-                "separate_by": self.separate_by}
 
 
 @dataclass(frozen=True)
@@ -200,6 +109,12 @@ class Porosity(Effect):
     separate_by: str = "the sample density against the mixture's (Archimedes) or micro-CT"
     kind: str = "material"
 
+    def composition(self, fraction, value):
+        f = np.asarray(fraction, dtype=float)
+        v = np.asarray(value, dtype=float)
+        shape = np.broadcast(f, v).shape
+        return np.broadcast_to(f, shape).astype(float), np.broadcast_to(v, shape).astype(float)
+
     def materials_in(self, microstructure: Microstructure, base: Materials,
                      value: float) -> Materials:
         if value <= 0:
@@ -230,6 +145,10 @@ class FillerFraction(Effect):
                       "the packing limit); the same factor for both fillers")
     separate_by: str = "ash content (TGA) or the sample density"
     kind: str = "geometry"
+
+    def composition(self, fraction, value):
+        f = np.asarray(fraction, dtype=float) * np.asarray(value, dtype=float)
+        return f, np.zeros(f.shape)
 
     def microstructure(self, base: Microstructure, value: float, seed: int) -> Microstructure:
         if value >= 1.0:
@@ -265,6 +184,10 @@ class ContactSpots(Effect):
     separate_by: str = ("a fraction series down to 30 vol% (few contacts) or the "
                         "conductivity after heat treatment (necks grow)")
     kind: str = "material"
+
+    def size_equivalent(self, value, scale):
+        # a conductance per contact acts through G / (k a)
+        return np.asarray(value, dtype=float) / scale
 
     def materials(self, base: Materials, value: float) -> Materials:
         fillers = sorted(p for p in base.conductivity if p != base.matrix)
@@ -319,11 +242,17 @@ class BatchFraction(Effect):
     def formulation_sd(self, slope: np.ndarray, value: np.ndarray) -> np.ndarray:
         return np.abs(slope) * np.asarray(value, dtype=float)
 
+    def fraction_sd(self, value):
+        return np.asarray(value, dtype=float)
+
 
 def default_effects() -> list[Effect]:
-    """The library, in the order the report lists it."""
+    """The library, in the order the report lists it: the seven of this module, then the
+    steepening candidates of :mod:`itr_identify.discrepancy.steepening` (film thinning,
+    agglomeration, size basis, interphase shell)."""
     return [MatrixConductivity(), FillerConductivity(), Porosity(), FillerFraction(),
-            ContactSpots(), TesterContact(), BatchFraction()]
+            ContactSpots(), TesterContact(), BatchFraction()] + [
+                cls() for cls in STEEPENING_EFFECTS]
 
 
 def by_key(keys: Sequence[str]) -> list[Effect]:

@@ -8,16 +8,19 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.interpolate import RegularGridInterpolator
 
 from ..inference.measurements import Measurements
+from ..inference.plausibility import powder_scale
 from .effects import Effect
+from .observables import AuxGroup, fraction_derivatives, predict
 from .tables import ForwardTables, resistance_name
 
-__all__ = ["Group", "groups_of", "ModelFit", "fit_model", "profile_interval", "pooled_scatter"]
+__all__ = ["Group", "groups_of", "ModelFit", "fit_model", "evaluate", "profile_interval",
+           "pooled_scatter"]
 
 
 @dataclass(frozen=True)
@@ -31,17 +34,21 @@ class Group:
     mean: float
     standard_error: float
     n: int
+    scale: float = 1.0
 
     @property
     def label(self) -> str:
         t = "" if self.thickness_m is None else f" @ {self.thickness_m * 1e3:g} mm"
-        return self.formulation + t
+        p = "" if self.scale == 1.0 else f" (powder x{self.scale:.3g})"
+        return self.formulation + p + t
 
 
 def groups_of(measurements: Measurements, fractions: dict[str, dict[str, float]], *,
               pool: bool = True) -> list[Group]:
     """Measurement groups of the single-filler formulations: per formulation, or per
-    formulation and thickness where the table gives thicknesses.
+    formulation and thickness where the table gives thicknesses, and per powder where it
+    gives a ``d50_um`` (the powder's median over the material system's is the group's
+    :attr:`Group.scale`).
 
     The standard error of a group mean comes from the replicate scatter about the group
     means: with ``pool`` (default) as a relative standard deviation pooled over every
@@ -59,25 +66,31 @@ def groups_of(measurements: Measurements, fractions: dict[str, dict[str, float]]
         v = measurements.values[f]
         t = (np.zeros(v.size) if measurements.thickness_m is None
              else measurements.thickness_m[f])
-        levels = np.unique(t)
-        means = {x: float(v[t == x].mean()) for x in levels}
-        ss = sum(((v[t == x] / means[x] - 1) ** 2).sum() for x in levels)
-        dof = v.size - levels.size
+        d50 = measurements.auxiliary_of("d50_um", f)
+        scale = (np.ones(v.size) if d50 is None else
+                 np.array([1.0 if not np.isfinite(x) else powder_scale(f, x) for x in d50]))
+        key = np.array([hash((a, b)) for a, b in zip(t, scale)])
+        levels = [(float(t[key == u][0]), float(scale[key == u][0])) for u in
+                  dict.fromkeys(key)]
+        sel = {x: (t == x[0]) & (scale == x[1]) for x in levels}
+        means = {x: float(v[sel[x]].mean()) for x in levels}
+        ss = sum(((v[sel[x]] / means[x] - 1) ** 2).sum() for x in levels)
+        dof = v.size - len(levels)
         if dof < 1:
             ss, dof = float(((v / v.mean() - 1) ** 2).sum()), v.size - 1
-        rows.append((f, filler, phi, v, t, levels, means, ss, dof))
+        rows.append((f, filler, phi, v, sel, levels, means, ss, dof))
     pooled = {}
     for fl in {r[1] for r in rows}:
         ss = sum(r[7] for r in rows if r[1] == fl)
         dof = sum(r[8] for r in rows if r[1] == fl)
         pooled[fl] = math.sqrt(ss / dof)
     out = []
-    for f, filler, phi, v, t, levels, means, ss, dof in rows:
+    for f, filler, phi, v, sel, levels, means, ss, dof in rows:
         rel = pooled[filler] if pool else math.sqrt(ss / dof)
         for x in levels:
-            n = int((t == x).sum())
+            n = int(sel[x].sum())
             out.append(Group(f, filler, phi, None if measurements.thickness_m is None
-                             else float(x), means[x], rel * means[x] / math.sqrt(n), n))
+                             else x[0], means[x], rel * means[x] / math.sqrt(n), n, x[1]))
     return out
 
 
@@ -95,11 +108,18 @@ class ModelFit:
         90 % likelihood-ratio interval of the effect's parameter (profiled over the
         resistances; :func:`profile_interval`): it contains the best value.
     predicted : ndarray
-        Model value per group at the best parameters, W/(m K).
+        Model value per k group at the best parameters, W/(m K).
     variance : ndarray
-        Likelihood variance per group, (W/(m K))^2.
+        Likelihood variance per k group, (W/(m K))^2.
     log_likelihood, chi_square, bic : float
+        Over every observation (k groups and auxiliary groups).
     n_parameters : int
+    at_grid_edge : bool
+        A resistance at an end of its grid.
+    aux_predicted, aux_variance : ndarray
+        Model value and likelihood variance per auxiliary group (empty without them).
+    n_observations : int
+        k groups plus auxiliary groups.
     """
 
     name: str
@@ -112,9 +132,15 @@ class ModelFit:
     bic: float
     n_parameters: int
     at_grid_edge: bool = False
+    aux_predicted: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    aux_variance: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    n_observations: int = 0
 
-    def dof(self, n_groups: int) -> int:
-        return max(n_groups - self.n_parameters, 1)
+    def dof(self, n_groups: int | None = None) -> int:
+        """Degrees of freedom: observations (default :attr:`n_observations`) less
+        parameters, at least 1."""
+        n = self.n_observations if n_groups is None else n_groups
+        return max(n - self.n_parameters, 1)
 
 
 def _fine_axis(e: Effect | None, n: int) -> np.ndarray:
@@ -166,19 +192,45 @@ def _by_formulation(groups: Sequence[Group]) -> dict[str, list[Group]]:
 def _gaussian_shared(means: Sequence[float], ks: Sequence[np.ndarray],
                      standard_errors: Sequence[float], scatter: float
                      ) -> tuple[np.ndarray, np.ndarray]:
-    """(log-likelihood, generalised chi-square) of one formulation's groups: independent
-    replicate errors ``se_g`` plus one RVE error ``scatter * k`` shared by all its groups
-    (the same RVEs model every thickness), i.e. covariance ``D + c c^T`` with
-    ``c_g = scatter k_g``, by the Sherman-Morrison formula."""
-    srr = scc = src = logd = 0.0
-    for m, k, se in zip(means, ks, standard_errors):
-        r, c, d = m - k, scatter * k, se ** 2
-        srr = srr + r * r / d
-        src = src + r * c / d
-        scc = scc + c * c / d
-        logd = logd + math.log(2 * math.pi * d)
-    quad = srr - src ** 2 / (1 + scc)
-    return -0.5 * (quad + logd + np.log1p(scc)), quad
+    """(log-likelihood, generalised chi-square) of one formulation's k groups: independent
+    replicate errors ``se_g`` plus one RVE error ``scatter * k`` shared by all its groups."""
+    c = [scatter * np.asarray(k) for k in ks]
+    return _gaussian_low_rank([m - k for m, k in zip(means, ks)],
+                              [se ** 2 for se in standard_errors], [c])
+
+
+def _gaussian_low_rank(residuals: Sequence[np.ndarray], variances: Sequence[np.ndarray],
+                       columns: Sequence[Sequence[np.ndarray]]
+                       ) -> tuple[np.ndarray, np.ndarray]:
+    """(log-likelihood, generalised chi-square) of residuals ``r`` with covariance
+    ``D + sum_j c_j c_j^T`` (``D`` diagonal of ``variances``; each ``c_j`` one error shared
+    by the observations, e.g. the RVE error of a formulation's k or a batch's fraction
+    error that moves its k, density and mass fraction together), elementwise over the
+    arrays' common shape (the calibration mesh), by the Woodbury identity:
+    ``r^T S^-1 r = r^T D^-1 r - b^T A^-1 b`` with ``A = I + C^T D^-1 C``, ``b = C^T D^-1 r``,
+    and ``log det S = sum log d + log det A``."""
+    r = np.broadcast_arrays(*[np.asarray(x, dtype=float) for x in residuals])
+    shape = np.broadcast_shapes(r[0].shape, *[np.shape(v) for v in variances],
+                                *[np.shape(x) for c in columns for x in c])
+    d = [np.broadcast_to(np.asarray(v, dtype=float), shape) for v in variances]
+    rr = [np.broadcast_to(x, shape) for x in r]
+    cols = [[np.broadcast_to(np.asarray(x, dtype=float), shape) for x in c] for c in columns]
+    cols = [c for c in cols if any(np.any(x != 0) for x in c)]
+    srr = sum(x * x / v for x, v in zip(rr, d))
+    logd = sum(np.log(2 * math.pi * v) for v in d)
+    if not cols:
+        return -0.5 * (srr + logd), srr
+    q = len(cols)
+    A = np.zeros(shape + (q, q))
+    b = np.zeros(shape + (q,))
+    for i, ci in enumerate(cols):
+        b[..., i] = sum(c * x / v for c, x, v in zip(ci, rr, d))
+        for j, cj in enumerate(cols):
+            A[..., i, j] = (i == j) + sum(a * c / v for a, c, v in zip(ci, cj, d))
+    sol = np.linalg.solve(A, b[..., None])[..., 0]
+    quad = srr - np.einsum("...i,...i->...", b, sol)
+    _, logdet = np.linalg.slogdet(A)
+    return -0.5 * (quad + logd + logdet), quad
 
 
 #: Half the 90 % quantile of chi-square with one degree of freedom: the drop of the profile
@@ -249,61 +301,118 @@ def _fraction_slopes(where: dict[str, tuple[str, float]], k: dict[str, np.ndarra
     return out
 
 
-def fit_model(tables: ForwardTables, groups: Sequence[Group], effect: Effect | None
-              ) -> ModelFit:
-    """Calibrate the base model (``effect=None``) or base + ``effect`` on the groups."""
+def fit_model(tables: ForwardTables, groups: Sequence[Group], effect: Effect | None,
+              aux: Sequence[AuxGroup] = (), *, at: float | None = None) -> ModelFit:
+    """Calibrate the base model (``effect=None``) or base + ``effect`` on the k groups and
+    the auxiliary groups ``aux`` (density, mass fraction: predicted from the composition the
+    effect gives, :mod:`.observables`).
+
+    Per formulation the observations share errors: the RVE error of its k, and for a
+    variance effect the batch's fraction error, which moves k (``d ln k / d phi``), the
+    density and the mass fraction together (:func:`_gaussian_low_rank`). A group of another
+    powder (:attr:`Group.scale`) reads the table at ``R / scale`` and the effect at its
+    size-equivalent value (:meth:`Effect.size_equivalent`); a thickness-dependent effect on
+    a table without thicknesses is read at :attr:`DiscrepancySettings.assumed_thickness_mm`.
+    ``at`` holds the effect's parameter at that value (the resistances still fitted).
+    """
     st = tables.settings
+    system = st.system
     logr = np.log10(np.asarray(st.r_grid_m2K_per_W))
     fine_r = np.linspace(logr[0], logr[-1], st.fine_points)
     fine_t = _fine_axis(effect, 41)
     fillers = sorted({g.filler for g in groups})
     scatter = pooled_scatter(tables, groups)
     kmesh = {}
+    theta_axis = np.asarray(effect.values if effect else [0.0], dtype=float)
+
+    def mesh(f: str, scale: float) -> np.ndarray:
+        if (f, scale) not in kmesh:
+            vals = (tables.base[f] if effect is None or not effect.solved
+                    else tables.effect[effect.name][f])
+            fr = np.clip(fine_r - math.log10(scale), logr[0], logr[-1])
+            ft = fine_t
+            if effect is not None and scale != 1.0:
+                ft = np.clip(effect.size_equivalent(fine_t, scale), theta_axis[0],
+                             theta_axis[-1])
+            level = tables.level(f, effect.name if effect else None)
+            kmesh[(f, scale)] = level * _interp(logr, theta_axis, vals, effect, fr, ft)
+        return kmesh[(f, scale)]
 
     def model_k(g: Group, i=slice(None), j=slice(None)) -> np.ndarray:
-        if g.formulation not in kmesh:
-            vals = (tables.base[g.formulation] if effect is None or not effect.solved
-                    else tables.effect[effect.name][g.formulation])
-            kmesh[g.formulation] = tables.level(g.formulation) * _interp(
-                logr, np.asarray(effect.values if effect else [0.0], dtype=float), vals,
-                effect, fine_r, fine_t)
-        k = kmesh[g.formulation][i, j]
-        if effect is not None and g.thickness_m is not None:
-            k = effect.apparent(k, g.thickness_m, fine_t[j] if np.ndim(k) == 0
-                                else fine_t[None, j])
+        k = mesh(g.formulation, g.scale)[i, j]
+        if effect is not None and (g.thickness_m is not None or effect.needs_thickness):
+            t = (g.thickness_m if g.thickness_m is not None
+                 else st.assumed_thickness_mm * 1e-3)
+            k = effect.apparent(k, t, fine_t[j] if np.ndim(k) == 0 else fine_t[None, j])
         return k
 
-    forms = _by_formulation(groups)
-    slopes = _fraction_slopes({f: (m[0].filler, m[0].fraction) for f, m in forms.items()},
-                              {f: model_k(m[0])[:, 0] for f, m in forms.items()})
-
-    def shared_sd(f: str, fl: str, i=slice(None), j=slice(None)) -> np.ndarray:
-        """Relative sd of the error shared by a formulation's groups on the (R, theta)
-        mesh: the RVE scatter and, for a variance effect, the effect's share."""
+    def composition(a: AuxGroup, j=slice(None)):
         if effect is None:
-            return np.asarray(scatter[fl])
-        extra = effect.formulation_sd(slopes[f][i, None] if np.ndim(slopes[f][i])
-                                      else slopes[f][i], fine_t[j])
-        return np.sqrt(scatter[fl] ** 2 + extra ** 2)
+            return np.asarray(a.fraction), np.asarray(0.0)
+        return effect.composition(a.fraction, fine_t[j])
+
+    def model_aux(a: AuxGroup, j=slice(None)) -> np.ndarray:
+        phi, p = composition(a, j)
+        v = predict(a.observable, system, a.filler, phi, p)
+        return v if np.ndim(v) == 0 else v[None, :]
+
+    forms = _by_formulation(groups)
+    aux_by: dict[str, list[AuxGroup]] = {}
+    for a in aux:
+        aux_by.setdefault(a.formulation, []).append(a)
+    slopes = _fraction_slopes({f: (m[0].filler, m[0].fraction) for f, m in forms.items()},
+                              {f: mesh(f, 1.0)[:, 0] for f, m in forms.items()})
+
+    def terms(f: str, i=slice(None), j=slice(None)):
+        """Residuals, variances and shared columns of formulation ``f``'s observations."""
+        members, extra = forms[f], aux_by.get(f, [])
+        fl = members[0].filler
+        ks = [model_k(g, i, j) for g in members]
+        res = [g.mean - k for g, k in zip(members, ks)]
+        var = [g.standard_error ** 2 for g in members]
+        rve = [scatter[fl] * k for k in ks] + [0.0] * len(extra)
+        batch = None
+        if effect is not None:
+            sd = effect.fraction_sd(fine_t[j])
+            if np.any(sd != 0):
+                sd = sd if np.ndim(sd) == 0 else sd[None, :]
+                sl = slopes[f][i] if np.ndim(slopes[f][i]) == 0 else slopes[f][i][:, None]
+                batch = [sl * k * sd for k in ks]
+        for a in extra:
+            pred = model_aux(a, j)
+            res.append(a.mean - pred)
+            var.append(a.standard_error ** 2 + (st.auxiliary_model_sd * pred) ** 2)
+            if batch is not None:
+                phi, p = composition(a, j)
+                d = fraction_derivatives(a.observable, system, a.filler, phi, p)
+                batch.append((d if np.ndim(d) == 0 else d[None, :]) * sd)
+        return res, var, [rve] + ([batch] if batch is not None else [])
 
     ll = {fl: np.zeros((fine_r.size, fine_t.size)) for fl in fillers}
     for f, members in forms.items():
-        fl = members[0].filler
-        ll[fl] = ll[fl] + _gaussian_shared([g.mean for g in members],
-                                           [model_k(g) for g in members],
-                                           [g.standard_error for g in members],
-                                           shared_sd(f, fl))[0]
+        ll[members[0].filler] = ll[members[0].filler] + _gaussian_low_rank(*terms(f))[0]
     profile = sum(ll[fl].max(axis=0) for fl in fillers)            # (ntheta,)
-    j = int(np.argmax(profile))
-    params, pred, var = {}, np.zeros(len(groups)), np.zeros(len(groups))
+    j = int(np.argmax(profile)) if at is None else int(np.argmin(np.abs(fine_t - at)))
+    params = {}
     best_i = {fl: int(np.argmax(ll[fl][:, j])) for fl in fillers}
     for fl in fillers:
         params[resistance_name(fl)] = float(10 ** fine_r[best_i[fl]])
-    sd_best = {f: float(shared_sd(f, m[0].filler, best_i[m[0].filler], j))
-               for f, m in forms.items()}
-    for i, g in enumerate(groups):
-        pred[i] = float(model_k(g, best_i[g.filler], j))
-        var[i] = g.standard_error ** 2 + (sd_best[g.formulation] * pred[i]) ** 2
+    index = {id(g): n for n, g in enumerate(groups)}
+    pred, var = np.zeros(len(groups)), np.zeros(len(groups))
+    aux_index = {id(a): n for n, a in enumerate(aux)}
+    aux_pred, aux_var = np.zeros(len(aux)), np.zeros(len(aux))
+    chi2 = 0.0
+    for f, members in forms.items():
+        i = best_i[members[0].filler]
+        res, v, cols = terms(f, i, j)
+        chi2 += float(_gaussian_low_rank(res, v, cols)[1])
+        # the marginal variance of each observation: its own plus the shared ones
+        for n, g in enumerate(members):
+            pred[index[id(g)]] = float(g.mean - res[n])
+            var[index[id(g)]] = float(v[n] + sum(c[n] ** 2 for c in cols))
+        for n, a in enumerate(aux_by.get(f, []), start=len(members)):
+            aux_pred[aux_index[id(a)]] = float(a.mean - res[n])
+            aux_var[aux_index[id(a)]] = float(v[n] + sum(c[n] ** 2 for c in cols))
     interval = None
     edge = any(best_i[fl] in (0, fine_r.size - 1) for fl in fillers)
     if effect is not None:
@@ -311,9 +420,38 @@ def fit_model(tables: ForwardTables, groups: Sequence[Group], effect: Effect | N
         interval = profile_interval(profile, fine_t)
     lmax = float(profile[j])
     p = len(fillers) + (effect is not None)
-    index = {id(g): i for i, g in enumerate(groups)}
-    chi2 = float(sum(_gaussian_shared([g.mean for g in m], [pred[index[id(g)]] for g in m],
-                                      [g.standard_error for g in m], sd_best[f])[1]
-                     for f, m in forms.items()))
+    n_obs = len(groups) + len(aux)
     return ModelFit("base" if effect is None else effect.name, params, interval, pred, var,
-                    lmax, chi2, -2 * lmax + p * math.log(len(groups)), p, edge)
+                    lmax, chi2, -2 * lmax + p * math.log(n_obs), p, edge, aux_pred, aux_var,
+                    n_obs)
+
+
+def evaluate(tables: ForwardTables, effect: Effect | None, parameters: dict[str, float],
+             groups: Sequence[Group], aux: Sequence[AuxGroup] = ()
+             ) -> tuple[np.ndarray, np.ndarray]:
+    """A model at given ``parameters`` (as :attr:`ModelFit.parameters`) on any groups: k
+    per group (W/(m K); of another powder, at another thickness) and the auxiliary
+    observables per auxiliary group, read as :func:`fit_model` reads them."""
+    st = tables.settings
+    logr = np.log10(np.asarray(st.r_grid_m2K_per_W))
+    axis = np.asarray(effect.values if effect else [0.0], dtype=float)
+    theta = float(parameters[effect.parameter]) if effect is not None else 0.0
+    k = np.zeros(len(groups))
+    for n, g in enumerate(groups):
+        vals = (tables.base[g.formulation] if effect is None or not effect.solved
+                else tables.effect[effect.name][g.formulation])
+        fr = np.clip(np.log10(parameters[resistance_name(g.filler)] / g.scale), logr[0],
+                     logr[-1])
+        ft = theta if effect is None or g.scale == 1.0 else float(np.clip(
+            effect.size_equivalent(theta, g.scale), axis[0], axis[-1]))
+        level = tables.level(g.formulation, effect.name if effect else None)
+        k[n] = level * _interp(logr, axis, vals, effect, np.array([fr]), np.array([ft]))[0, 0]
+        if effect is not None and (g.thickness_m is not None or effect.needs_thickness):
+            t = g.thickness_m if g.thickness_m is not None else st.assumed_thickness_mm * 1e-3
+            k[n] = float(effect.apparent(np.asarray(k[n]), t, theta))
+    a_out = np.zeros(len(aux))
+    for n, a in enumerate(aux):
+        phi, p = ((a.fraction, 0.0) if effect is None
+                  else effect.composition(a.fraction, theta))
+        a_out[n] = float(predict(a.observable, st.system, a.filler, phi, p))
+    return k, a_out

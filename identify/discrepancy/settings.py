@@ -6,6 +6,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from itr_fv.materials.material_system import MaterialSystem
+from itr_fv.materials.paper_data import PAPER_SYSTEM
 from itr_fv.rve.spec import RVESpec
 
 from ..forward.fidelity import FaithfulRVE, faithful_for
@@ -46,6 +48,26 @@ class DiscrepancySettings:
         and diffuse mismatch give 1e-9 to 1e-8 for clean oxide or nitride-polymer
         interfaces; adsorbed layers and coupling agents up to about 1e-7): a fit outside it
         is reported as an implausible resistance.
+    system : MaterialSystem
+        Phase densities (g/cm^3) for the density and filler mass fraction of a sample
+        (default: the paper's system with handbook densities, Al2O3 3.95, AlN 3.26,
+        silicone 0.97; :meth:`MaterialSystem.with_densities` overrides them).
+    auxiliary_model_sd : float
+        Relative standard uncertainty of a predicted density or mass fraction (the mixture
+        rule with handbook phase densities), added to the replicate error of each.
+    assumed_thickness_mm : float
+        Sample thickness at which the tester's contact resistance is fitted on a table
+        without thicknesses (then only ``R_c / t`` is identified), mm.
+    auxiliary_noise : dict
+        The noise the workflow assumes for an auxiliary measurement it proposes (the
+        measurement that would decide a tie): ``density_g_per_cm3`` relative sd per sample,
+        ``filler_mass_fraction`` absolute sd per sample, ``samples`` per formulation,
+        ``thicknesses_mm`` of a thickness series, ``powder_scale`` of a second powder
+        (its median over the nominal one).
+    correct_at_best : bool
+        Correct a named or leading candidate's table level by faithful solves with the
+        effect switched on at its best value (:mod:`itr_identify.discrepancy.best_point`),
+        rather than by the base model's factor.
     """
 
     forward: ForwardSettings = field(default_factory=lambda: ForwardSettings(
@@ -58,6 +80,13 @@ class DiscrepancySettings:
     tie_margin: float = 2.0
     significance: float = 0.01
     physical_r_m2K_per_W: tuple[float, float] = (1e-9, 1e-7)
+    system: MaterialSystem = PAPER_SYSTEM
+    auxiliary_model_sd: float = 0.002
+    assumed_thickness_mm: float = 1.0
+    auxiliary_noise: dict = field(default_factory=lambda: {
+        "density_g_per_cm3": 0.003, "filler_mass_fraction": 0.003, "samples": 4,
+        "thicknesses_mm": (0.5, 1.0, 1.5), "powder_scale": 0.5})
+    correct_at_best: bool = True
 
     def __post_init__(self) -> None:
         r = np.asarray(self.r_grid_m2K_per_W, dtype=float)
@@ -74,6 +103,12 @@ class DiscrepancySettings:
         if not 0 < lo < hi:
             raise ValueError(f"physical_r_m2K_per_W: expected 0 < low < high m^2 K/W, got "
                              f"{self.physical_r_m2K_per_W!r}")
+        if not 0 <= self.auxiliary_model_sd < 0.1:
+            raise ValueError(f"auxiliary_model_sd: expected a relative sd in [0, 0.1), got "
+                             f"{self.auxiliary_model_sd!r}")
+        if not 0.01 <= self.assumed_thickness_mm <= 20:
+            raise ValueError(f"assumed_thickness_mm: expected 0.01 - 20 mm, got "
+                             f"{self.assumed_thickness_mm!r}")
         if not 0 < self.significance < 1:
             raise ValueError(f"significance: expected a p-value in (0, 1), got "
                              f"{self.significance!r}")

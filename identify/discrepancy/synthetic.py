@@ -14,6 +14,7 @@ from ..inference.formulations import fractions_of
 from ..inference.measurements import Measurements, read_measurements
 from .effects import Effect
 from .settings import DiscrepancySettings
+from .steepening import Repacker
 
 __all__ = ["synthetic_measurements", "paper_noise"]
 
@@ -76,11 +77,12 @@ def synthetic_measurements(formulations: Sequence[str], resistances: dict[str, f
             ks = []
             for r in range(rves):
                 ms = model.pack(r)
+                pack = Repacker.of(model, r)
                 if modify is not None:
                     ms = modify(ms, rve_seed + r)
                 m = mat
                 for e, v in ([(effect, value)] if effect is not None else []) + list(extra):
-                    ms = e.microstructure(ms, v, seed=rve_seed + r)
+                    ms = e.rebuild(pack, ms, v, seed=rve_seed + r)
                     m = e.materials_in(ms, m, v)
                 ks.append(full_solve(ms, m, s.solver_tol, solver=s.solver).mean())
             k = float(np.mean(ks))

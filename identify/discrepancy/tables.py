@@ -41,11 +41,14 @@ class ForwardTables:
     solves: int = 0
     seconds: float = 0.0
     corrections: dict[str, Correction] = field(default_factory=dict)
+    effect_corrections: dict[tuple[str, str], Correction] = field(default_factory=dict)
 
-    def level(self, formulation: str) -> float:
+    def level(self, formulation: str, effect: str | None = None) -> float:
         """Factor from the first replica's table to the model's k: the replica factor
-        times the faithful correction's factor (1 without one)."""
-        c = self.corrections.get(formulation)
+        times the faithful correction's factor (1 without one); for a candidate
+        ``effect`` corrected at its best point (:mod:`.best_point`), that correction's."""
+        c = self.effect_corrections.get((effect, formulation)) if effect else None
+        c = c if c is not None else self.corrections.get(formulation)
         return self.replica_factor[formulation] * (c.factor if c is not None else 1.0)
 
     def relative_sd(self, formulation: str) -> float:
@@ -123,13 +126,17 @@ def build_tables(fractions: dict[str, dict[str, float]], *,
             ms0 = model.microstructures[0]
             # one column per (effect, value) that changes the RVE or its phases; the base
             # model first; every column is k_iso over the resistance grid
+            # (an effect that packs its own RVE repacks replica 0 with its seed)
+            from .steepening import Repacker
+            pack = Repacker.of(model, 0)
             columns = [("base", None, ms0, model.materials)]
             for e in effects:
                 for theta in e.values:
                     if e.solved and theta != e.nominal:
-                        columns.append((e.name, theta, e.microstructure(ms0, theta, seed=s.seed),
-                                        lambda v, e=e, theta=theta: e.materials_in(
-                                            ms0, model.materials(v), theta)))
+                        ms = e.rebuild(pack, ms0, theta, seed=s.seed)
+                        columns.append((e.name, theta, ms,
+                                        lambda v, e=e, theta=theta, ms=ms: e.materials_in(
+                                            ms, model.materials(v), theta)))
             requests = [SolveRequest.for_materials(
                 RVEData.of(ms), materials_at({r_name: R}), s.solver_tol, solver=s.solver,
                 purpose="discrepancy table", formulation=f, effect=name,

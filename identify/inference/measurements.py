@@ -34,14 +34,19 @@ from pathlib import Path
 
 import numpy as np
 
-from .formulations import formulation_name, fractions_of
-from .plausibility import check_conductivity, check_thickness
+from itr_fv.materials.material_system import MaterialSystem
 
-__all__ = ["Measurements", "read_measurements", "read_tester_readings",
+from .formulations import formulation_name, fractions_of
+from .plausibility import check_auxiliary, check_conductivity, check_thickness
+
+__all__ = ["Measurements", "read_measurements", "read_tester_readings", "AUXILIARY_COLUMNS",
            "conductivity_from_impedance", "TABLE3"]
 
 TABLE_COLUMNS = ("formulation", "replicate", "k_W_per_mK")
 THICKNESS_COLUMN = "thickness_mm"
+#: Optional per-sample observables besides k (blank cells allowed): the sample density,
+#: the filler mass fraction, the powder's number-median diameter.
+AUXILIARY_COLUMNS = ("density_g_per_cm3", "filler_mass_fraction", "d50_um")
 READING_COLUMNS = ("formulation", "replicate", "thickness_mm", "impedance_K_mm2_per_W")
 
 
@@ -62,11 +67,30 @@ class Measurements:
     thickness_m : dict of str to ndarray, optional
         Sample thickness of each replicate, m (where the table has a ``thickness_mm``
         column).
+    auxiliary : dict of str to (dict of str to ndarray), optional
+        Per column of :data:`AUXILIARY_COLUMNS` the table has: per formulation, one value
+        per replicate (NaN: not measured on that sample), in the column's unit.
     """
 
     values: dict[str, np.ndarray]
     source: str
     thickness_m: dict[str, np.ndarray] | None = None
+    auxiliary: dict[str, dict[str, np.ndarray]] | None = None
+
+    def auxiliary_of(self, column: str, formulation: str) -> np.ndarray | None:
+        """The replicate values of an auxiliary ``column`` of ``formulation`` (NaN where a
+        sample was not measured); None where the table has no such column."""
+        if column not in AUXILIARY_COLUMNS:
+            raise ValueError(f"column: expected one of {AUXILIARY_COLUMNS}, got {column!r}")
+        if not self.auxiliary or column not in self.auxiliary:
+            return None
+        return self.auxiliary[column].get(formulation)
+
+    @property
+    def auxiliary_columns(self) -> list[str]:
+        """The auxiliary columns the table holds a value in."""
+        return [c for c in AUXILIARY_COLUMNS if self.auxiliary and c in self.auxiliary
+                and any(np.isfinite(v).any() for v in self.auxiliary[c].values())]
 
     @property
     def formulations(self) -> list[str]:
@@ -96,8 +120,11 @@ class Measurements:
         self._get(formulation)
         t = None if self.thickness_m is None else {
             k: v for k, v in self.thickness_m.items() if k != formulation}
+        aux = None if self.auxiliary is None else {
+            c: {k: v for k, v in per.items() if k != formulation}
+            for c, per in self.auxiliary.items()}
         return Measurements({k: v for k, v in self.values.items() if k != formulation},
-                            f"{self.source} without {formulation}", t)
+                            f"{self.source} without {formulation}", t, aux)
 
 
 def _read_text(path: Path) -> str:
@@ -166,7 +193,8 @@ def _formulation(path: Path, line: int, name: str, known) -> str:
 
 
 def _finish(path: Path, values: dict[str, list[float]], source: str,
-            thickness: dict[str, list[float]] | None = None) -> Measurements:
+            thickness: dict[str, list[float]] | None = None,
+            auxiliary: dict[str, dict[str, list[float]]] | None = None) -> Measurements:
     for name, v in values.items():
         if len(v) < 2:
             raise ValueError(f"{path.name}: formulation {name!r} has {len(v)} replicate; at "
@@ -176,7 +204,9 @@ def _finish(path: Path, values: dict[str, list[float]], source: str,
                              f"{v[0]:g}; their variance (zero) enters the likelihood, so they "
                              "must be separate measurements")
     t = None if not thickness else {k: np.array(v) * 1e-3 for k, v in thickness.items()}
-    return Measurements({k: np.array(v) for k, v in values.items()}, source, t)
+    aux = None if not auxiliary else {c: {k: np.array(v, dtype=float) for k, v in per.items()}
+                                      for c, per in auxiliary.items()}
+    return Measurements({k: np.array(v) for k, v in values.items()}, source, t, aux)
 
 
 def _known(formulations: set[str] | Callable[[str], object] | None
@@ -187,8 +217,8 @@ def _known(formulations: set[str] | Callable[[str], object] | None
 
 
 def read_measurements(path: str | Path | None = None, *,
-                      formulations: set[str] | Callable[[str], object] | None = None
-                      ) -> Measurements:
+                      formulations: set[str] | Callable[[str], object] | None = None,
+                      system: MaterialSystem | None = None) -> Measurements:
     """A measurement table (default: the paper's Table 3, shipped).
 
     Parameters
@@ -202,6 +232,9 @@ def read_measurements(path: str | Path | None = None, *,
         accept (default: :func:`itr_identify.inference.formulations.fractions_of`, the
         command line's: Table 2 names and ``<filler>-<vol%>`` pairs). Matched in any letter
         case; the result is keyed by the canonical spelling (``al2o3-55`` -> ``Al2O3-55``).
+    system : MaterialSystem, optional
+        The phases whose densities bound a sample's density (default: the paper's system
+        with the handbook densities, :data:`itr_fv.materials.paper_data.PAPER_SYSTEM`).
 
     Raises
     ------
@@ -211,7 +244,10 @@ def read_measurements(path: str | Path | None = None, *,
         fraction-like formulation (a near miss such as ``Al203-60`` with "did you mean
         'Al2O3-60'?"), a replicate given twice, fewer than 2 replicates or
         identical ones, a missing, non-positive or implausible thickness where the column
-        exists.
+        exists; an auxiliary value no sample of the formulation can have
+        (:mod:`~itr_identify.inference.plausibility`: a density outside the range of its
+        phases' mixtures, a mass fraction outside 0-1, a powder median far from the
+        material system's).
 
     Warns
     -----
@@ -231,6 +267,8 @@ def read_measurements(path: str | Path | None = None, *,
     seen: set[tuple[str, str]] = set()
     rows = _rows(p, text, TABLE_COLUMNS)
     with_thickness = THICKNESS_COLUMN in rows[0][1]
+    aux_columns = [c for c in AUXILIARY_COLUMNS if c in rows[0][1]]
+    auxiliary: dict[str, dict[str, list[float]]] = {c: {} for c in aux_columns}
     for line, row in rows:
         name = _formulation(p, line, row["formulation"], known)
         rep = row["replicate"]
@@ -244,7 +282,15 @@ def read_measurements(path: str | Path | None = None, *,
             t = _number(p, line, row, THICKNESS_COLUMN)
             check_thickness(f"{p.name} line {line}", t)
             thickness.setdefault(name, []).append(t)
-    return _finish(p, values, TABLE3 if path is None else str(p), thickness)
+        for c in aux_columns:
+            v = math.nan
+            if row.get(c, ""):
+                v = check_auxiliary(f"{p.name} line {line}", name, c,
+                                    _number(p, line, row, c, positive=False), system)
+            auxiliary[c].setdefault(name, []).append(v)
+    auxiliary = {c: per for c, per in auxiliary.items()
+                 if any(math.isfinite(x) for v in per.values() for x in v)}
+    return _finish(p, values, TABLE3 if path is None else str(p), thickness, auxiliary)
 
 
 def conductivity_from_impedance(thickness_m: np.ndarray,

@@ -22,7 +22,8 @@ from itr_fv.materials import paper_data
 from .formulations import fractions_of
 
 __all__ = ["ImplausibleMeasurementWarning", "conductivity_range", "check_conductivity",
-           "check_thickness", "THICKNESS_RANGE_MM"]
+           "check_thickness", "THICKNESS_RANGE_MM", "density_range", "powder_scale",
+           "check_auxiliary", "POWDER_SCALE_RANGE"]
 
 class ImplausibleMeasurementWarning(UserWarning):
     """A measured value that physics allows but that is more likely a wrong unit."""
@@ -96,3 +97,78 @@ def check_thickness(where: str, thickness_mm: float, *, column: str = "thickness
         hint = "in um" if thickness_mm > hi else "in m"
         raise ValueError(f"{where}: {column} {thickness_mm:g} mm is outside the {lo:g} - "
                          f"{hi:g} mm of a thermal-interface sample; is it {hint}?")
+
+
+#: A powder of a size series may be this many times finer or coarser than the material
+#: system's (the forward tables reach its interface resistances scaled by the size ratio).
+POWDER_SCALE_RANGE = (0.25, 4.0)
+
+
+def density_range(formulation: str, system=None) -> tuple[float, float] | None:
+    """``(rho_min, rho_max)`` in g/cm^3 that a sample of ``formulation`` can have: any
+    void-free mixture of its phases lies between the matrix's and the densest filler's
+    density (a sample below its matrix's density would be more void than composite); None
+    for a name that gives no composition or a system without densities."""
+    try:
+        fillers = fractions_of(formulation)
+    except ValueError:
+        return None
+    system = system or paper_data.PAPER_SYSTEM
+    rho = system.densities(fillers)
+    return rho[system.matrix], max(rho[f] for f in fillers)
+
+
+def powder_scale(formulation: str, d50_um: float, system=None) -> float:
+    """The ratio of a powder's number-median diameter ``d50_um`` to the material system's
+    (Table 1) for the single filler of ``formulation``."""
+    fillers = fractions_of(formulation)
+    if len(fillers) != 1:
+        raise ValueError(f"d50_um: a size series needs a single-filler formulation, got "
+                         f"{formulation!r}")
+    system = system or paper_data.PAPER_SYSTEM
+    psd = system.filler(next(iter(fillers))).psd
+    return float(d50_um) / float(psd.median_um)
+
+
+def check_auxiliary(where: str, formulation: str, column: str, value: float,
+                    system=None) -> float:
+    """Refuse an auxiliary observable no sample of ``formulation`` can have (ValueError
+    starting with ``where`` and naming the column); returns ``value``.
+
+    ``density_g_per_cm3`` outside :func:`density_range`; ``filler_mass_fraction`` outside
+    (0, 1) (a percentage is refused with its fraction); ``d50_um`` whose ratio to the
+    material system's median lies outside :data:`POWDER_SCALE_RANGE`.
+    """
+    import math
+
+    if not math.isfinite(value):
+        raise ValueError(f"{where}: {column} must be finite, got {value!r}")
+    if column == "density_g_per_cm3":
+        rng = density_range(formulation, system)
+        if rng is not None and not rng[0] <= value <= rng[1]:
+            hint = (f" (if it is in kg/m^3, it is {value / 1000:g} g/cm^3)" if value > 100
+                    else "")
+            raise ValueError(f"{where}: density_g_per_cm3 {value:g} is outside {rng[0]:g} - "
+                             f"{rng[1]:g} g/cm^3, what a sample of {formulation} can have "
+                             f"(its matrix's to its densest filler's density){hint}")
+    elif column == "filler_mass_fraction":
+        if not 0 < value < 1:
+            hint = (f" (if it is in per cent, it is {value / 100:g})" if 1 < value < 100
+                    else "")
+            raise ValueError(f"{where}: filler_mass_fraction {value:g} is outside 0 - 1 (a "
+                             f"mass fraction){hint}")
+    elif column == "d50_um":
+        if not value > 0:
+            raise ValueError(f"{where}: d50_um must be > 0 um, got {value:g}")
+        try:
+            s = powder_scale(formulation, value, system)
+        except ValueError as exc:
+            raise ValueError(f"{where}: {exc}") from None
+        lo, hi = POWDER_SCALE_RANGE
+        if not lo <= s <= hi:
+            raise ValueError(f"{where}: d50_um {value:g} um is {s:.3g} times the material "
+                             f"system's median for {formulation}; a size series is modelled "
+                             f"for {lo:g} - {hi:g} times")
+    else:
+        raise ValueError(f"column: expected an auxiliary column, got {column!r}")
+    return float(value)

@@ -46,6 +46,7 @@ def report_lines(d: Discrepancy, settings: DiscrepancySettings) -> list[str]:
                      f"{d.base.predicted[i]:.3f} | {100 * (d.base.predicted[i] / g.mean - 1):+.1f}"
                      f" | {zb:+.2f} | {after.predicted[i]:.3f} | "
                      f"{100 * (after.predicted[i] / g.mean - 1):+.1f} | {za:+.2f} |")
+    lines += _auxiliary_lines(d, after)
     lines += ["", "## Structure of the base residuals", ""]
     lines += [f"- {s}" for s in d.structure]
     lines += ["", "## Candidates (ranked by BIC)", "",
@@ -56,6 +57,7 @@ def report_lines(d: Discrepancy, settings: DiscrepancySettings) -> list[str]:
     for name, why in d.skipped.items():
         lines.append(f"| {name} | not tried: {why} | | | | | |")
     lines += _model_form_lines(d)
+    lines += _deciding_lines(d)
     lines += ["", f"A candidate is named when it lowers the BIC by {settings.bic_margin:g} or "
               f"more, leaves no significant residual (p >= {settings.significance:g}) and "
               "needs no resistance at the edge of its range; candidates within "
@@ -69,6 +71,8 @@ def report_lines(d: Discrepancy, settings: DiscrepancySettings) -> list[str]:
     f = settings.forward
     t = d.tables
     lines += ["", "## Settings", "",
+              "- phase densities (g/cm^3; handbook unless overridden with --density): "
+              + ", ".join(f"{k} {v:g}" for k, v in d.densities.items()),
               f"- RVE: {f.box_um:g} um box, {f.voxel_um:g} um voxels, {f.replicas} replicas "
               f"(packing seed {f.seed}), gap contact model, solver tolerance {f.solver_tol:g}",
               _faithful_line(settings, t),
@@ -159,3 +163,41 @@ def gap_figure(d: Discrepancy, path: Path) -> Path:
         fig.savefig(tmp, dpi=120, format="png")
     plt.close(fig)
     return Path(path)
+
+
+def _auxiliary_lines(d: Discrepancy, after: ModelFit) -> list[str]:
+    """The auxiliary observations (density, mass fraction) against both models."""
+    if not d.aux:
+        return []
+    out = ["", "## Auxiliary observations before and after", "",
+           "Each predicted from the composition the model gives the sample (the phase "
+           "densities below); z as for k.", "",
+           f"| observation | measured | base | base z | {after.name} | z |",
+           "|---|---|---|---|---|---|"]
+    for i, a in enumerate(d.aux):
+        zb = (a.mean - d.base.aux_predicted[i]) / np.sqrt(d.base.aux_variance[i])
+        za = (a.mean - after.aux_predicted[i]) / np.sqrt(after.aux_variance[i])
+        out.append(f"| {a.label} | {a.mean:.4g} +- {a.standard_error:.2g} | "
+                   f"{d.base.aux_predicted[i]:.4g} | {zb:+.2f} | "
+                   f"{after.aux_predicted[i]:.4g} | {za:+.2f} |")
+    return out
+
+
+def _deciding_lines(d: Discrepancy) -> list[str]:
+    """The tied set and the auxiliary measurements ranked by how well they separate it."""
+    if len(d.tied) < 2:
+        return []
+    out = ["", "## What the data cannot tell apart, and the measurement that would", "",
+           "Tied: " + "; ".join("no effect (base)" if m.name == "base" else m.name
+                                for m in d.tied) + ".", ""]
+    if not d.deciding:
+        return out + ["No auxiliary measurement is left to propose (the table has them all)."]
+    out += ["Each measurement simulated from each tied model's fit (noise-free expected data, "
+            "the stated noise), every tied model refitted: pairs separated by the BIC "
+            "margin.", "", "| measurement | pairs separated | least separation (BIC) | "
+            "least separated pair |", "|---|---|---|---|"]
+    for x in d.deciding:
+        (a, b), v = x.worst
+        out.append(f"| {x.description} | {x.separated} of {len(x.separation)} | {v:.1f} | "
+                   f"{a} / {b} |")
+    return out

@@ -9,8 +9,10 @@ from pathlib import Path
 
 from itr_fv.io import begin_run, write_manifest, write_text
 
+from ..discrepancy.best_point import corrector
 from ..discrepancy.decision import Discrepancy, find_discrepancy
 from ..discrepancy.effects import default_effects
+from ..discrepancy.observables import auxiliary_groups
 from ..discrepancy.settings import DiscrepancySettings
 from ..discrepancy.tables import build_tables, n_solves
 from ..inference.formulations import fractions_of
@@ -33,9 +35,10 @@ def run_discrepancy(meas: Measurements, settings: DiscrepancySettings, out: Path
     re-run (another table, or after a kill) on the same store redoes none that finished."""
     from tqdm.auto import tqdm
 
+    comps = {f: fractions_of(f) for f in meas.formulations}
+    auxiliary_groups(meas, comps)          # an auxiliary column without its noise: refused now
     out = Path(out)
     begin_run(out)
-    comps = {f: fractions_of(f) for f in meas.formulations}
     singles = {f: c for f, c in comps.items() if len(c) == 1}
     effects = default_effects() if effects is None else list(effects)
     with open_engine(out, workers=workers, scheduler=scheduler, store=store,
@@ -44,8 +47,9 @@ def run_discrepancy(meas: Measurements, settings: DiscrepancySettings, out: Path
                  unit="solve", disable=not progress) as bar:
         tables = build_tables(singles, settings=settings, effects=effects,
                               tick=lambda: bar.update(), engine=engine)
+        correct = corrector(engine) if settings.correct_at_best else None
+        d = find_discrepancy(meas, settings=settings, tables=tables, correct=correct)
     echo(f"engine: {engine.summary()}")
-    d = find_discrepancy(meas, settings=settings, tables=tables)
     files = [write_text(out / "discrepancy.json", json.dumps(d.to_dict(), indent=2) + "\n")]
     files.append(gap_figure(d, out / "discrepancy.png"))
     lines = [f"# Discrepancy between model and measurements: {meas.source}", ""]
@@ -55,6 +59,7 @@ def run_discrepancy(meas: Measurements, settings: DiscrepancySettings, out: Path
     files.append(write_manifest(out, files, {"job": "discrepancy", "measurements": meas.source,
                                              "forward": settings.forward.to_dict(),
                                              "faithful": (settings.faithful.to_dict()
-                                                          if settings.faithful else None)}))
+                                                          if settings.faithful else None),
+                                             "densities_g_per_cm3": d.densities}))
     echo(f"discrepancy: {d.verdict}; wrote {out / 'discrepancy.md'}")
     return d

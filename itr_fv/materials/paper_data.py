@@ -24,7 +24,7 @@ __all__ = ["read_table", "table_text", "formulations", "psd_lognormal", "paper_r
            "paper_validation"]
 
 TABLES = ("formulations", "measured_tc", "paper_itr", "paper_validation", "parameter_grid",
-          "psd_lognormal", "conductivities")
+          "psd_lognormal", "conductivities", "densities")
 
 
 def table_text(name: str) -> str:
@@ -58,11 +58,13 @@ def psd_lognormal() -> dict[str, tuple[float, float]]:
 def _paper_system() -> MaterialSystem:
     psd = psd_lognormal()
     rows = read_table("conductivities")
+    rho = {r["material"]: float(r["density_g_per_cm3"]) for r in read_table("densities")}
     (matrix,) = [r for r in rows if r["role"] == "matrix"]
     fillers = tuple(Filler(r["material"], float(r["k_W_per_mK"]),
-                           LogNormalPSD(*psd[r["material"]], "number"))
+                           LogNormalPSD(*psd[r["material"]], "number"), rho.get(r["material"]))
                     for r in rows if r["role"] == "filler")
-    return MaterialSystem(matrix["material"], float(matrix["k_W_per_mK"]), fillers)
+    return MaterialSystem(matrix["material"], float(matrix["k_W_per_mK"]), fillers,
+                          rho.get(matrix["material"]))
 
 
 #: The paper's material system: silicone 0.18 W/(m K) with Al2O3 (30) and AlN (200) of the

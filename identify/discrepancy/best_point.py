@@ -1,0 +1,107 @@
+"""A candidate's table level corrected at its best point (issue 40, point 2).
+
+The forward tables are solved on the cheap RVE; their level is corrected to the faithful
+fidelity once per formulation, without any effect (:mod:`.tables`). An effect can change
+that correction: solid contact spots, for one, conduct differently through a contact drawn
+at another voxel. :func:`corrector` returns the step that, for the candidates that would be
+named (a BIC gain of the margin or more over the base model), solves the faithful packings
+of every formulation with the effect switched on at the candidate's best value and
+resistance (both voxels, the voxel bias extrapolated away, on the solve engine and in its
+store), replaces that candidate's level by the corrected one and refits it. The table value
+it is compared with is the first replica's at that point times the replica factor.
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Callable
+from dataclasses import replace
+
+import numpy as np
+
+from itr_fv.rve import build_rve
+from itr_surrogate.engine import RVEData, SolveEngine, SolveRequest
+
+from ..forward.fidelity import Correction
+from ..forward.model import MATRIX, PARAMETRISATIONS, ForwardModel, _specs
+from ..inference.formulations import fractions_of
+from .fit import Group, evaluate, fit_model
+from .outcome import Discrepancy
+from .steepening import Repacker
+from .tables import resistance_name
+
+__all__ = ["corrector", "effect_correction"]
+
+
+def effect_correction(d: Discrepancy, effect, value: float,
+                      resistances: dict[str, float], formulation: str,
+                      engine: SolveEngine, tick: Callable[[], None] | None = None
+                      ) -> Correction:
+    """The faithful correction of ``formulation``'s table level with ``effect`` at
+    ``value`` and the given resistances (full solves on the faithful packings)."""
+    st = d.tables.settings
+    fa = st.faithful
+    comp = fractions_of(formulation)
+    (filler, phi), = comp.items()
+    model = ForwardModel(formulation, comp, PARAMETRISATIONS["gap"], st.forward, engine=engine)
+    r_name = resistance_name(filler)
+    base_mat = model.materials({r_name: resistances[r_name]})
+    spec = fa.spec_for([filler], st.forward.rve)
+    coarse = fa.coarse_shape([filler])
+    requests, seeds = [], []
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        for j in range(fa.packings):
+            ms, seed = build_rve(spec, _specs(comp, st.forward.psd_basis), j, matrix=MATRIX,
+                                 warn_box_cut=False)
+            seeds.append(seed)
+            ms = effect.rebuild(Repacker(spec.with_(seed=seed), comp, st.forward.psd_basis),
+                                ms, value, seed)
+            mat = effect.materials_in(ms, base_mat, value)
+            rve = RVEData.of(ms)
+            for grid, label in ((rve, "fine"), (replace(rve, shape=coarse), "coarse")):
+                requests.append(SolveRequest.for_materials(
+                    grid, mat, st.forward.solver_tol, solver=st.forward.solver,
+                    purpose=f"best-point {label}", formulation=formulation,
+                    effect=effect.name, effect_value=float(value)))
+    results = engine.solve(requests, tick=tick)
+    k = np.array([r.k_diagonal for r in results])
+    g = Group(formulation, filler, phi, None, 1.0, 1.0, 1)
+    params = {r_name: resistances[r_name], effect.parameter: float(value)}
+    k_table = evaluate(_uncorrected(d.tables), effect, params, [g])[0][0]
+    return Correction({r_name: resistances[r_name]}, fa.box_for([filler]), fa.voxel_um,
+                      fa.coarse_voxel_um, seeds, float(k_table), k[0::2], k[1::2])
+
+
+def _uncorrected(tables):
+    """The tables with no correction for any effect (the level the best point is compared
+    with: the replica factor times the base model's correction is divided out below)."""
+    return replace(tables, corrections={}, effect_corrections={})
+
+
+def corrector(engine: SolveEngine, *, tick: Callable[[], None] | None = None
+              ) -> Callable[[Discrepancy], None]:
+    """The step :func:`~.decision.find_discrepancy` takes before deciding (its ``correct``):
+    every solved candidate that lowers the BIC by the margin or more is refitted with its
+    level corrected at its best point; the corrections are kept in the tables
+    (:attr:`~.tables.ForwardTables.effect_corrections`) and listed in
+    :attr:`~.decision.Discrepancy.corrected_at_best`."""
+    def correct(d: Discrepancy) -> None:
+        st = d.tables.settings
+        if st.faithful is None:
+            return
+        for n, m in enumerate(list(d.candidates)):
+            e = next(x for x in d.effects if x.name == m.name)
+            value = m.parameters[e.parameter]
+            if (not e.solved or d.base.bic - m.bic < st.bic_margin or m.at_grid_edge
+                    or value == e.nominal):
+                continue
+            forms = sorted({g.formulation for g in d.groups})
+            for f in forms:
+                d.tables.effect_corrections[(e.name, f)] = effect_correction(
+                    d, e, value, m.parameters, f, engine, tick)
+            d.corrected_at_best[e.name] = {
+                f: d.tables.effect_corrections[(e.name, f)].factor for f in forms}
+            d.candidates[n] = fit_model(d.tables, d.groups, e, d.aux)
+        d.candidates.sort(key=lambda x: x.bic)
+    return correct
