@@ -1,8 +1,9 @@
 """What the data cannot tell apart, and the measurement that would.
 
 :func:`tied_set` lists the models (the base model and the candidates) that explain the
-measurements equally well: physically plausible (no resistance at the edge of its grid or
-outside its physical range, an effect's value inside its physical range), within
+measurements equally well when each is fitted with its resistances in
+:attr:`~.settings.DiscrepancySettings.physical_r_m2K_per_W` and its value in its physical
+range (the best plausible explanation of each), within
 :attr:`~.settings.DiscrepancySettings.tie_margin` of the best in ``-2 ln L``, and, for a
 candidate, with a 90 % interval that reaches at least one grid step away from nominal (an
 effect the data allow, not only its absence). Where an effect is absorbed by the
@@ -45,7 +46,7 @@ MEASUREMENTS = {
 }
 
 #: At most this many tied models are simulated (the most likely first).
-MAX_TIED = 5
+MAX_TIED = 8
 
 
 def _effect(d: Discrepancy, name: str):
@@ -79,16 +80,17 @@ def _reaches(m: ModelFit, d: Discrepancy) -> bool:
 
 
 def tied_set(d: Discrepancy, st: DiscrepancySettings) -> list[ModelFit]:
-    """The models the data cannot tell apart (see the module's text), best first; the
-    winner alone where one is named."""
+    """The models the data cannot tell apart (see the module's text), best first, each
+    fitted within its physical ranges; the winner alone where one is named."""
     if d.verdict == "named" and d.winner is not None:
         return [d.winner]
     if d.verdict == "tie" and d.winner is not None:
         return [d.winner] + [m for m in d.candidates if m is not d.winner
                              and m.bic - d.winner.bic < st.tie_margin
                              and _plausible(m, d, st)]
-    models = [d.base] + list(d.candidates)
-    pool = [m for m in models if _plausible(m, d, st)] or models
+    models = [fit_model(d.tables, d.groups, _effect(d, m.name), d.aux, physical=True)
+              for m in [d.base] + list(d.candidates)]
+    pool = [m for m in models if m.log_likelihood > -1e299]
     best = min(-2 * m.log_likelihood for m in pool)
     out = [m for m in pool if -2 * m.log_likelihood - best <= st.tie_margin
            and (m.name == "base" or (_reaches(m, d) and not _effect(d, m.name)
@@ -175,14 +177,24 @@ def representative(m: ModelFit, d: Discrepancy) -> ModelFit:
         return m
     lo, hi = m.interval
     end = lo if abs(lo - e.nominal) > abs(hi - e.nominal) else hi
-    return fit_model(d.tables, d.groups, e, d.aux, at=end)
+    return fit_model(d.tables, d.groups, e, d.aux, at=end, physical=True)
+
+
+def _side(m: ModelFit, d: Discrepancy) -> int:
+    """-1 or +1: the side of nominal the tied candidate's effect lies on (0: the base)."""
+    e = _effect(d, m.name)
+    if e is None:
+        return 0
+    return -1 if m.parameters[e.parameter] < e.nominal else 1
 
 
 def _pair_separation(sep: dict[tuple[str, str], float], a: str, b: str) -> float:
     """The expected BIC separation of one pair: where one is the base model, how far the
     base falls behind when the effect is true (a true base model can only pin the
     effect's value, never gain the margin over a model that nests it); else the smaller
-    of the two directions."""
+    of the two directions, each alternative refitted with its effect present (a grid step
+    or more from nominal), so that a measurement that would show an effect absent
+    separates it."""
     if a == "base":
         return sep[(b, a)]
     if b == "base":
@@ -198,13 +210,16 @@ def rank_measurements(d: Discrepancy, st: DiscrepancySettings,
     their separations, best first."""
     tied = d.tied[:MAX_TIED]
     truths = {m.name: representative(m, d) for m in tied}
+    sides = {n: _side(t, d) for n, t in truths.items()}
     out = []
     for key in _available(d):
         sep, outcomes = {}, {}
         for name, truth in truths.items():
             groups, aux, shown = _expected_data(key, d, st, truth)
             outcomes[name] = _few(shown)
-            fits = {m.name: fit_model(d.tables, groups, _effect(d, m.name), aux)
+            fits = {m.name: fit_model(d.tables, groups, _effect(d, m.name), aux,
+                                      physical=True,
+                                      present=0 if m.name == name else sides[m.name])
                     for m in tied}
             for m in tied:
                 if m.name != name:

@@ -302,7 +302,8 @@ def _fraction_slopes(where: dict[str, tuple[str, float]], k: dict[str, np.ndarra
 
 
 def fit_model(tables: ForwardTables, groups: Sequence[Group], effect: Effect | None,
-              aux: Sequence[AuxGroup] = (), *, at: float | None = None) -> ModelFit:
+              aux: Sequence[AuxGroup] = (), *, at: float | None = None,
+              physical: bool = False, present: int = 0) -> ModelFit:
     """Calibrate the base model (``effect=None``) or base + ``effect`` on the k groups and
     the auxiliary groups ``aux`` (density, mass fraction: predicted from the composition the
     effect gives, :mod:`.observables`).
@@ -313,7 +314,12 @@ def fit_model(tables: ForwardTables, groups: Sequence[Group], effect: Effect | N
     powder (:attr:`Group.scale`) reads the table at ``R / scale`` and the effect at its
     size-equivalent value (:meth:`Effect.size_equivalent`); a thickness-dependent effect on
     a table without thicknesses is read at :attr:`DiscrepancySettings.assumed_thickness_mm`.
-    ``at`` holds the effect's parameter at that value (the resistances still fitted).
+    ``at`` holds the effect's parameter at that value (the resistances still fitted);
+    ``physical`` restricts the resistances to
+    :attr:`DiscrepancySettings.physical_r_m2K_per_W` and the effect's value to its physical
+    range (the best plausible explanation; the interval is then inside those ranges);
+    ``present`` (-1 or +1) holds the effect at least one grid step below or above nominal
+    (the effect there, not its absence).
     """
     st = tables.settings
     system = st.system
@@ -391,6 +397,23 @@ def fit_model(tables: ForwardTables, groups: Sequence[Group], effect: Effect | N
     ll = {fl: np.zeros((fine_r.size, fine_t.size)) for fl in fillers}
     for f, members in forms.items():
         ll[members[0].filler] = ll[members[0].filler] + _gaussian_low_rank(*terms(f))[0]
+    if physical:
+        lo, hi = np.log10(st.physical_r_m2K_per_W)
+        out_r = (fine_r < lo - 1e-9) | (fine_r > hi + 1e-9)
+        out_t = np.zeros(fine_t.size, dtype=bool)
+        if effect is not None and effect.physical_range is not None:
+            a, b = effect.physical_range
+            out_t = (fine_t < a - 1e-12) | (fine_t > b * (1 + 1e-9))
+        for fl in fillers:
+            ll[fl] = np.where(out_r[:, None] | out_t[None, :], -1e300, ll[fl])
+    if present and effect is not None:
+        v = np.asarray(effect.values, dtype=float)
+        side = v[v < effect.nominal] if present < 0 else v[v > effect.nominal]
+        if side.size:
+            edge = side.max() if present < 0 else side.min()
+            absent = fine_t > edge * (1 + 1e-9) if present < 0 else fine_t < edge * (1 - 1e-9)
+            for fl in fillers:
+                ll[fl] = np.where(absent[None, :], -1e300, ll[fl])
     profile = sum(ll[fl].max(axis=0) for fl in fillers)            # (ntheta,)
     j = int(np.argmax(profile)) if at is None else int(np.argmin(np.abs(fine_t - at)))
     params = {}
