@@ -302,10 +302,15 @@ def score(case: str, d, columns: str) -> dict:
     after = d.winner or (d.candidates[0] if d.candidates else d.base)
     tied = [m.name for m in d.tied]
     truth_model = "base" if case == "null" else expected
-    deciding = d.deciding[0] if d.deciding else None
+    named = [x for x in d.deciding if x.key in d.deciding_keys]
     in_tied = truth_model in tied if truth_model is not None else None
-    decides = (None if deciding is None or truth_model is None
-               else deciding.separates(truth_model))
+    decides = None
+    if named and truth_model is not None:
+        # the truth told from every other tied model by one of the measurements named
+        others = [m for m in tied if m != truth_model]
+        decides = all(any(x.separation.get((a, b), x.separation.get((b, a), -1.0))
+                          >= x.margin for x in named
+                          for a, b in [(truth_model, o)]) for o in others)
     return {"case": case, "columns": columns,
             "truth": (f"{expected or case} = {value:g}" if value is not None
                       else "noise only"),
@@ -314,10 +319,12 @@ def score(case: str, d, columns: str) -> dict:
             "chi2_dof_after": d.chi_square_per_dof(after), "after": after.name,
             "base_resistances": {k: v for k, v in d.base.parameters.items()},
             "named_correctly": bool(ok), "tied": tied, "truth_in_tied": in_tied,
-            "deciding": deciding.key if deciding else None,
+            "deciding": " + ".join(d.deciding_keys) or None,
             "deciding_separates_truth": decides,
             "ranking": [{"key": x.key, "pairs_separated": x.separated,
-                         "pairs": len(x.separation)} for x in d.deciding],
+                         "pairs": len(x.separation),
+                         "separation": [[a, b, v] for (a, b), v in x.separation.items()]}
+                        for x in d.deciding],
             "corrected_at_best": d.corrected_at_best,
             "statement": d.statement,
             "intervals": [{"model": m.name, "best": m.parameters[e.parameter],

@@ -77,13 +77,16 @@ def add_parser(sub) -> None:
                        "missing effect explains it",
                        description="Calibrate the base model and each candidate effect "
                        "(matrix and filler conductivity, porosity, filler fraction, solid "
-                       "contact spots, tester contact resistance, batch fraction) on a "
-                       "measurement table, "
-                       "test the residuals and name the effect the data support; writes "
-                       "discrepancy.md, .json, .png and manifest.json. About 30 min on 2 "
-                       "cores on Table 3 (1288 full solves: the 12 um tables and the 24 um "
-                       "corrections, kept in OUT/solves or --store); under a minute again on "
-                       "the same store.")
+                       "contact spots, tester contact resistance, batch fraction; film "
+                       "thinning, agglomeration, size basis, interphase shell) on a "
+                       "measurement table with its optional density, mass fraction and "
+                       "size-series columns, test the residuals, name the effect the data "
+                       "support or list the tied set with the measurement that would decide "
+                       "it; writes discrepancy.md, .json, .png and manifest.json. About 40 "
+                       "min on 2 cores on Table 3 (2016 full solves: the 12 um tables and "
+                       "the 24 um corrections, kept in OUT/solves or --store; 32 more per "
+                       "candidate corrected at its best point); a few minutes again on the "
+                       "same store.")
     p.add_argument("measurements", metavar="MEASUREMENTS", nargs="?", default=None,
                    help="CSV: formulation,replicate,k_W_per_mK[,thickness_mm] and optionally "
                    "a lab's second measurements per sample: density_g_per_cm3 (Archimedes), "

@@ -35,7 +35,8 @@ from .tables import resistance_name
 if TYPE_CHECKING:                                         # pragma: no cover
     from ..inference.measurements import Measurements
 
-__all__ = ["DecidingMeasurement", "tied_set", "rank_measurements", "MEASUREMENTS"]
+__all__ = ["DecidingMeasurement", "tied_set", "rank_measurements", "deciding_pair",
+           "MEASUREMENTS"]
 
 #: The auxiliary measurements the workflow can propose: key -> what a lab does.
 MEASUREMENTS = {
@@ -239,3 +240,23 @@ def _few(shown: list[tuple[str, float]]) -> list[tuple[str, float]]:
     return [shown[0], shown[len(shown) // 2 - 1], shown[len(shown) // 2], shown[-1]]
 
 
+
+
+def deciding_pair(ranked: list[DecidingMeasurement]
+                  ) -> tuple[DecidingMeasurement, DecidingMeasurement] | None:
+    """Where no single measurement separates every pair of tied models, the two whose
+    separated pairs together cover them all (each separates its pairs on its own; taken
+    together they can only separate more), the most separating first; None where no two
+    do or one alone does."""
+    if not ranked or ranked[0].decides:
+        return None
+    best = None
+    for i, a in enumerate(ranked):
+        for b in ranked[i + 1:]:
+            union = {p for p in a.separation
+                     if max(a.separation[p], b.separation.get(p, -np.inf)) >= a.margin}
+            if len(union) == len(a.separation):
+                score = a.score + b.score
+                if best is None or score > best[0]:
+                    best = (score, a, b)
+    return None if best is None else (best[1], best[2])

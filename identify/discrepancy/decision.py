@@ -12,7 +12,7 @@ from scipy import stats
 from ..forward.model import MATRIX
 from ..inference.formulations import fractions_of
 from ..inference.measurements import Measurements
-from .deciding import rank_measurements, tied_set
+from .deciding import deciding_pair, rank_measurements, tied_set
 from .effects import Effect
 from .fit import Group, ModelFit, fit_model, groups_of
 from .model_form import AMPLITUDE_RANGE, fit_model_form, leave_one_out
@@ -310,7 +310,17 @@ def _say_tied(d: Discrepancy, st: DiscrepancySettings) -> None:
                      f"{e.name} (what would: {e.separate_by})" for e in scale) + ".")
     if d.deciding:
         best = d.deciding[0]
-        text += " " + best.sentence()
+        pair = deciding_pair(d.deciding)
+        if pair is None:
+            d.deciding_keys = [best.key]
+            text += " " + best.sentence()
+        else:
+            d.deciding_keys = [pair[0].key, pair[1].key]
+            text += (f" No single measurement separates every pair; together, "
+                     f"{pair[0].description} and {pair[1].description} are expected to "
+                     f"(each separating {pair[0].separated} and {pair[1].separated} of "
+                     f"{len(best.separation)} pairs on its own). " + pair[0].sentence()
+                     + " " + pair[1].sentence())
     d.statement += text
 
 

@@ -131,6 +131,9 @@ class Discrepancy:
         among :attr:`tied` (best first).
     corrected_at_best : dict
         Per candidate corrected at its best point: formulation -> its correction factor.
+    deciding_keys : list of str
+        The measurement named to decide the tied set: the best one, or the two that
+        together separate every pair where no single one does.
     """
 
     verdict: str
@@ -152,6 +155,7 @@ class Discrepancy:
     tied: list[ModelFit] = field(default_factory=list)
     deciding: list[DecidingMeasurement] = field(default_factory=list)
     corrected_at_best: dict[str, dict[str, float]] = field(default_factory=dict)
+    deciding_keys: list[str] = field(default_factory=list)
 
     def p_value(self, fit: ModelFit) -> float:
         return float(stats.chi2.sf(fit.chi_square, fit.dof()))
@@ -180,6 +184,7 @@ class Discrepancy:
                 "densities_g_per_cm3": self.densities,
                 "tied": [m.name for m in self.tied],
                 "deciding": [x.to_dict() for x in self.deciding],
+                "deciding_keys": self.deciding_keys,
                 "corrected_at_best": self.corrected_at_best,
                 "base": fit_dict(self.base), "candidates": [fit_dict(c) for c in self.candidates],
                 "skipped": self.skipped, "structure": self.structure,
