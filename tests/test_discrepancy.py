@@ -209,8 +209,13 @@ def test_discrepancy_command_end_to_end(tmp_path, capsys):
     meas = synthetic_measurements(FORMS[:4], TRUE_R, effect=fx.MatrixConductivity(),
                                   value=0.30, settings=SETTINGS.forward, seed=3)
     csv = tmp_path / "m.csv"
-    csv.write_text("formulation,replicate,k_W_per_mK\n" + "".join(
-        f"{f},{i + 1},{k:.4f}\n" for f, v in meas.values.items() for i, k in enumerate(v)))
+    # with each sample's density at the nominal composition (Archimedes, 0.3 % noise)
+    rng = np.random.default_rng(5)
+    rho = {f: next(iter(fractions_of(f).values())) * 3.95
+           + (1 - next(iter(fractions_of(f).values()))) * 0.97 for f in meas.values}
+    csv.write_text("formulation,replicate,k_W_per_mK,density_g_per_cm3\n" + "".join(
+        f"{f},{i + 1},{k:.4f},{rho[f] * (1 + 0.003 * rng.standard_normal()):.4f}\n"
+        for f, v in meas.values.items() for i, k in enumerate(v)))
     out = tmp_path / "out"
     flags = ["--effects", "matrix", "--box-um", "12", "--voxel-um", "0.5", "--replicas", "2",
              "--seed", "3", "--fidelity", "quick", "--no-progress", "--store",
@@ -223,6 +228,10 @@ def test_discrepancy_command_end_to_end(tmp_path, capsys):
     assert lo <= 0.30 <= hi
     md = (out / "discrepancy.md").read_text()
     assert "matrix conductivity off nominal" in md and "Al2O3-60" in md
+    # the densities in the likelihood and the report, the phase densities stated
+    assert len(data["auxiliary"]) == 4 and data["densities_g_per_cm3"]["Al2O3"] == 3.95
+    assert "## Auxiliary observations before and after" in md
+    assert "phase densities (g/cm^3" in md and "Al2O3 3.95" in md
     assert (out / "discrepancy.png").stat().st_size > 1000
     files = {f["path"] for f in json.loads((out / "manifest.json").read_text())["files"]}
     assert files >= {"discrepancy.md", "discrepancy.json", "discrepancy.png"}
