@@ -20,6 +20,7 @@ measurement decides the set when every ordered pair is separated by the BIC marg
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import replace
 from typing import TYPE_CHECKING
@@ -35,8 +36,8 @@ from .tables import resistance_name
 if TYPE_CHECKING:                                         # pragma: no cover
     from ..inference.measurements import Measurements
 
-__all__ = ["DecidingMeasurement", "tied_set", "rank_measurements", "deciding_pair",
-           "MEASUREMENTS"]
+__all__ = ["DecidingMeasurement", "tied_set", "rank_measurements", "deciding_set",
+           "unseparated", "MEASUREMENTS"]
 
 #: The auxiliary measurements the workflow can propose: key -> what a lab does.
 MEASUREMENTS = {
@@ -242,21 +243,31 @@ def _few(shown: list[tuple[str, float]]) -> list[tuple[str, float]]:
 
 
 
-def deciding_pair(ranked: list[DecidingMeasurement]
-                  ) -> tuple[DecidingMeasurement, DecidingMeasurement] | None:
-    """Where no single measurement separates every pair of tied models, the two whose
-    separated pairs together cover them all (each separates its pairs on its own; taken
-    together they can only separate more), the most separating first; None where no two
-    do or one alone does."""
-    if not ranked or ranked[0].decides:
-        return None
-    best = None
-    for i, a in enumerate(ranked):
-        for b in ranked[i + 1:]:
-            union = {p for p in a.separation
-                     if max(a.separation[p], b.separation.get(p, -np.inf)) >= a.margin}
-            if len(union) == len(a.separation):
-                score = a.score + b.score
+def deciding_set(ranked: list[DecidingMeasurement]) -> list[DecidingMeasurement]:
+    """The fewest measurements whose separated pairs together cover every pair of tied
+    models (each separates its pairs on its own; taken together they can only separate
+    more), the most separating set of that size, best first; where no set covers them
+    all, the best single measurement."""
+    if not ranked:
+        return []
+    pairs = set(ranked[0].separation)
+    for size in range(1, len(ranked) + 1):
+        best = None
+        for combo in itertools.combinations(ranked, size):
+            union = {p for p in pairs if any(x.separation.get(p, -np.inf) >= x.margin
+                                             for x in combo)}
+            if union == pairs:
+                score = sum(x.score for x in combo)
                 if best is None or score > best[0]:
-                    best = (score, a, b)
-    return None if best is None else (best[1], best[2])
+                    best = (score, list(combo))
+        if best is not None:
+            return best[1]
+    return [ranked[0]]
+
+
+def unseparated(ranked: list[DecidingMeasurement]) -> list[tuple[str, str]]:
+    """The pairs of tied models no measurement separates."""
+    if not ranked:
+        return []
+    return [p for p in ranked[0].separation
+            if not any(x.separation.get(p, -np.inf) >= x.margin for x in ranked)]

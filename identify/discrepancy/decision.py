@@ -12,12 +12,12 @@ from scipy import stats
 from ..forward.model import MATRIX
 from ..inference.formulations import fractions_of
 from ..inference.measurements import Measurements
-from .deciding import deciding_pair, rank_measurements, tied_set
+from .deciding import deciding_set, rank_measurements, tied_set, unseparated
 from .effects import Effect
 from .fit import Group, ModelFit, fit_model, groups_of
 from .model_form import AMPLITUDE_RANGE, fit_model_form, leave_one_out
 from .observables import auxiliary_groups
-from .outcome import Discrepancy
+from .outcome import Discrepancy, _short
 from .settings import DiscrepancySettings
 from .tables import ForwardTables, build_tables
 
@@ -309,18 +309,22 @@ def _say_tied(d: Discrepancy, st: DiscrepancySettings) -> None:
                  "tell it from the resistances: " + "; ".join(
                      f"{e.name} (what would: {e.separate_by})" for e in scale) + ".")
     if d.deciding:
-        best = d.deciding[0]
-        pair = deciding_pair(d.deciding)
-        if pair is None:
-            d.deciding_keys = [best.key]
-            text += " " + best.sentence()
+        chosen = deciding_set(d.deciding)
+        d.deciding_keys = [x.key for x in chosen]
+        n = len(d.deciding[0].separation)
+        if len(chosen) > 1:
+            text += (" No single measurement separates every pair; together these "
+                     f"{len(chosen)} are expected to: "
+                     + "; ".join(x.description for x in chosen) + " ("
+                     + ", ".join(f"{x.separated}" for x in chosen)
+                     + f" of the {n} pairs on its own, in that order).")
         else:
-            d.deciding_keys = [pair[0].key, pair[1].key]
-            text += (f" No single measurement separates every pair; together, "
-                     f"{pair[0].description} and {pair[1].description} are expected to "
-                     f"(each separating {pair[0].separated} and {pair[1].separated} of "
-                     f"{len(best.separation)} pairs on its own). " + pair[0].sentence()
-                     + " " + pair[1].sentence())
+            left = unseparated(d.deciding)
+            if left:
+                text += (" No measurement proposed separates "
+                         + "; ".join(f"{_short(a)} / {_short(b)}" for a, b in left)
+                         + " (k at other fractions or another kind of evidence would).")
+        text += "".join(" " + x.sentence(alone=len(chosen) == 1) for x in chosen)
     d.statement += text
 
 

@@ -72,15 +72,20 @@ class DecidingMeasurement:
         """Whether every ordered pair is separated by the margin."""
         return self.worst[1] >= self.margin
 
-    def sentence(self) -> str:
+    def sentence(self, *, alone: bool = True) -> str:
+        """What it would show under each tied model; ``alone``: named as the one
+        measurement (else as one of a set)."""
         (a, b), s = self.worst
         verb = "would decide them" if self.decides else "would separate them best"
         n = len(self.separation)
         outs = "; ".join(f"under {_short(m)}: " + ", ".join(f"{lab} {v:.4g}" for lab, v in o)
                          for m, o in self.outcomes.items())
-        return (f"The measurement that {verb}: {self.description} (expected to separate "
-                f"{self.separated} of {n} pairs by a BIC of {self.margin:g} or more; least "
-                f"{s:.1f}, between {_short(a)} and {_short(b)}). Expected outcome {outs}.")
+        head = (f"The measurement that {verb}: {self.description} (expected to separate "
+                if alone else f"{self.description[0].upper()}{self.description[1:]}: "
+                "expected to separate ")
+        return (head + f"{self.separated} of {n} pairs by a BIC of {self.margin:g} or more; "
+                f"least {s:.1f}, between {_short(a)} and {_short(b)}"
+                + (")" if alone else "") + f". Expected outcome {outs}.")
 
     def to_dict(self) -> dict:
         return {"key": self.key, "description": self.description,
