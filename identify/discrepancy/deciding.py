@@ -3,10 +3,12 @@
 :func:`tied_set` lists the models (the base model and the candidates) that explain the
 measurements equally well when each is fitted with its resistances in
 :attr:`~.settings.DiscrepancySettings.physical_r_m2K_per_W` and its value in its physical
-range (the best plausible explanation of each), within
-:attr:`~.settings.DiscrepancySettings.tie_margin` of the best in ``-2 ln L``, and, for a
-candidate, with a 90 % interval that reaches at least one grid step away from nominal (an
-effect the data allow, not only its absence). Where an effect is absorbed by the
+range (the best plausible explanation of each): less than
+:attr:`~.settings.DiscrepancySettings.bic_margin` behind the best in ``-2 ln L`` (the margin
+that would name one: a model is ruled out by as much as another is named by), and, for a
+candidate, with the values it allows within that margin (its profile within half the
+margin of its maximum) reaching at least one grid step from nominal (an effect the data
+allow, not only its absence). Where an effect is absorbed by the
 resistances (filler conductivity, porosity, a fraction error on k alone), its candidate
 and the base model sit in this set.
 
@@ -90,11 +92,12 @@ def tied_set(d: Discrepancy, st: DiscrepancySettings) -> list[ModelFit]:
         return [d.winner] + [m for m in d.candidates if m is not d.winner
                              and m.bic - d.winner.bic < st.tie_margin
                              and _plausible(m, d, st)]
-    models = [fit_model(d.tables, d.groups, _effect(d, m.name), d.aux, physical=True)
+    models = [fit_model(d.tables, d.groups, _effect(d, m.name), d.aux, physical=True,
+                        interval_drop=st.bic_margin / 2)
               for m in [d.base] + list(d.candidates)]
     pool = [m for m in models if m.log_likelihood > -1e299]
     best = min(-2 * m.log_likelihood for m in pool)
-    out = [m for m in pool if -2 * m.log_likelihood - best <= st.tie_margin
+    out = [m for m in pool if -2 * m.log_likelihood - best < st.bic_margin
            and (m.name == "base" or (_reaches(m, d) and not _effect(d, m.name)
                                      .scales_resistance))]
     out.sort(key=lambda m: -m.log_likelihood)

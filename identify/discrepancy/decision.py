@@ -333,5 +333,5 @@ def _model_words(m: ModelFit, d: Discrepancy) -> str:
         return "no effect (the base model)"
     e = next(e for e in d.effects if e.name == m.name)
     lo, hi = m.interval
-    return (f"{m.name} ({e.parameter} {m.parameters[e.parameter]:.3g}, 90 % "
+    return (f"{m.name} ({e.parameter} {m.parameters[e.parameter]:.3g}, allowed "
             f"{lo:.3g} - {hi:.3g})")

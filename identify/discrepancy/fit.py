@@ -303,7 +303,8 @@ def _fraction_slopes(where: dict[str, tuple[str, float]], k: dict[str, np.ndarra
 
 def fit_model(tables: ForwardTables, groups: Sequence[Group], effect: Effect | None,
               aux: Sequence[AuxGroup] = (), *, at: float | None = None,
-              physical: bool = False, present: int = 0) -> ModelFit:
+              physical: bool = False, present: int = 0,
+              interval_drop: float | None = None) -> ModelFit:
     """Calibrate the base model (``effect=None``) or base + ``effect`` on the k groups and
     the auxiliary groups ``aux`` (density, mass fraction: predicted from the composition the
     effect gives, :mod:`.observables`).
@@ -319,7 +320,8 @@ def fit_model(tables: ForwardTables, groups: Sequence[Group], effect: Effect | N
     :attr:`DiscrepancySettings.physical_r_m2K_per_W` and the effect's value to its physical
     range (the best plausible explanation; the interval is then inside those ranges);
     ``present`` (-1 or +1) holds the effect at least one grid step below or above nominal
-    (the effect there, not its absence).
+    (the effect there, not its absence); ``interval_drop`` replaces the 90 % interval's
+    log-likelihood drop.
     """
     st = tables.settings
     system = st.system
@@ -378,12 +380,13 @@ def fit_model(tables: ForwardTables, groups: Sequence[Group], effect: Effect | N
         var = [g.standard_error ** 2 for g in members]
         rve = [scatter[fl] * k for k in ks] + [0.0] * len(extra)
         batch = None
+        sd = np.asarray(st.fraction_sd)
         if effect is not None:
-            sd = effect.fraction_sd(fine_t[j])
-            if np.any(sd != 0):
-                sd = sd if np.ndim(sd) == 0 else sd[None, :]
-                sl = slopes[f][i] if np.ndim(slopes[f][i]) == 0 else slopes[f][i][:, None]
-                batch = [sl * k * sd for k in ks]
+            sd = np.hypot(effect.fraction_sd(fine_t[j]), st.fraction_sd)
+        if np.any(sd != 0):
+            sd = sd if np.ndim(sd) == 0 else sd[None, :]
+            sl = slopes[f][i] if np.ndim(slopes[f][i]) == 0 else slopes[f][i][:, None]
+            batch = [sl * k * sd for k in ks]
         for a in extra:
             pred = model_aux(a, j)
             res.append(a.mean - pred)
@@ -440,7 +443,7 @@ def fit_model(tables: ForwardTables, groups: Sequence[Group], effect: Effect | N
     edge = any(best_i[fl] in (0, fine_r.size - 1) for fl in fillers)
     if effect is not None:
         params[effect.parameter] = float(fine_t[j])
-        interval = profile_interval(profile, fine_t)
+        interval = profile_interval(profile, fine_t, interval_drop or LR_DROP_90)
     lmax = float(profile[j])
     p = len(fillers) + (effect is not None)
     n_obs = len(groups) + len(aux)

@@ -58,6 +58,10 @@ class DiscrepancySettings:
         about 1.0 g/cm^3 moves a 60 vol% composite by 0.05 %), added to the replicate error
         of each. The phase densities themselves are stated inputs: their error would move
         every formulation of a filler together.
+    fraction_sd : float
+        Standard deviation of a formulation's actual filler volume fraction about its
+        stated one (weighing, losses in mixing), an error shared by its k, density and mass
+        fraction (a batch candidate adds its own to it).
     assumed_thickness_mm : float
         Sample thickness at which the tester's contact resistance is fitted on a table
         without thicknesses (then only ``R_c / t`` is identified), mm.
@@ -85,6 +89,7 @@ class DiscrepancySettings:
     physical_r_m2K_per_W: tuple[float, float] = (1e-9, 1e-7)
     system: MaterialSystem = PAPER_SYSTEM
     auxiliary_model_sd: float = 0.001
+    fraction_sd: float = 0.002
     assumed_thickness_mm: float = 1.0
     auxiliary_noise: dict = field(default_factory=lambda: {
         "density_g_per_cm3": 0.003, "filler_mass_fraction": 0.003, "samples": 4,
@@ -109,6 +114,9 @@ class DiscrepancySettings:
         if not 0 <= self.auxiliary_model_sd < 0.1:
             raise ValueError(f"auxiliary_model_sd: expected a relative sd in [0, 0.1), got "
                              f"{self.auxiliary_model_sd!r}")
+        if not 0 <= self.fraction_sd < 0.05:
+            raise ValueError(f"fraction_sd: expected a volume fraction in [0, 0.05), got "
+                             f"{self.fraction_sd!r}")
         if not 0.01 <= self.assumed_thickness_mm <= 20:
             raise ValueError(f"assumed_thickness_mm: expected 0.01 - 20 mm, got "
                              f"{self.assumed_thickness_mm!r}")
