@@ -248,12 +248,15 @@ def _few(shown: list[tuple[str, float]]) -> list[tuple[str, float]]:
 
 def deciding_set(ranked: list[DecidingMeasurement]) -> list[DecidingMeasurement]:
     """The fewest measurements whose separated pairs together cover every pair of tied
-    models (each separates its pairs on its own; taken together they can only separate
-    more), the most separating set of that size, best first; where no set covers them
-    all, the best single measurement."""
+    models that any of them separates (each separates its pairs on its own; taken together
+    they can only separate more), the most separating set of that size, best first;
+    empty where none separates any pair (:func:`unseparated` lists the pairs left)."""
     if not ranked:
         return []
-    pairs = set(ranked[0].separation)
+    pairs = {p for p in ranked[0].separation
+             if any(x.separation.get(p, -np.inf) >= x.margin for x in ranked)}
+    if not pairs:
+        return []
     for size in range(1, len(ranked) + 1):
         best = None
         for combo in itertools.combinations(ranked, size):

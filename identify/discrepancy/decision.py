@@ -312,18 +312,17 @@ def _say_tied(d: Discrepancy, st: DiscrepancySettings) -> None:
         chosen = deciding_set(d.deciding)
         d.deciding_keys = [x.key for x in chosen]
         n = len(d.deciding[0].separation)
+        left = unseparated(d.deciding)
         if len(chosen) > 1:
-            text += (" No single measurement separates every pair; together these "
+            text += (" No single measurement separates every pair it could; together these "
                      f"{len(chosen)} are expected to: "
                      + "; ".join(x.description for x in chosen) + " ("
                      + ", ".join(f"{x.separated}" for x in chosen)
                      + f" of the {n} pairs on its own, in that order).")
-        else:
-            left = unseparated(d.deciding)
-            if left:
-                text += (" No measurement proposed separates "
-                         + "; ".join(f"{_short(a)} / {_short(b)}" for a, b in left)
-                         + " (k at other fractions or another kind of evidence would).")
+        if left:
+            text += (" No measurement proposed separates "
+                     + "; ".join(f"{_short(a)} / {_short(b)}" for a, b in left)
+                     + " (k at other fractions or another kind of evidence would).")
         text += "".join(" " + x.sentence(alone=len(chosen) == 1) for x in chosen)
     d.statement += text
 
