@@ -50,7 +50,7 @@ MEASUREMENTS = {
 }
 
 #: At most this many tied models are simulated (the most likely first).
-MAX_TIED = 8
+MAX_TIED = 12
 
 
 def _effect(d: Discrepancy, name: str):
