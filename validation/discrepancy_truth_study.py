@@ -136,7 +136,7 @@ def truth_materials(comp: dict[str, float]) -> Materials:
 def pack(comp: dict[str, float], spec: RVESpec, width: float = 1.0) -> Microstructure:
     fillers = [FillerSpec.from_table1(f, v) for f, v in comp.items()]
     if width != 1.0:
-        fillers = [replace(x, psd=replace(x.psd, sigma=x.psd.sigma * width)) for x in fillers]
+        fillers = [replace(x, sigma=x.sigma * width) for x in fillers]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         return build_rve(spec, fillers, 0, matrix=MATRIX).microstructure
