@@ -129,6 +129,8 @@ def find_discrepancy(measurements: Measurements, *,
     if missing:
         raise ValueError(f"tables: no forward table for {missing}")
     effects = list(tables.effects if effects is None else effects)
+    # corrections at best points belong to one table's fits: none carried from an earlier call
+    tables.effect_corrections.clear()
     groups = groups_of(measurements, comps)
     aux = auxiliary_groups(measurements, comps)
     base = fit_model(tables, groups, None, aux)
