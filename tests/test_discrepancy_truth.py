@@ -6,8 +6,9 @@ its faithful correction: 14 um from 0.28 and 0.5 um), packing seeds the workflow
 effects built with itr_fv's public API, Table 3's replicate noise, each sample's density
 from the truth RVE's sphere volumes. With the density column (and a thickness series for the
 tester) the workflow must stay silent on noise and name the tester's contact resistance
-(porosity: named or leading a tie with a fraction loss) with the truth inside the interval; k-only, porosity is tied and the measurement
-named to decide it must be one that does; every interval it reports holds its best value.
+(porosity: named or leading a tie with a fraction loss) with the truth inside the interval;
+k-only, porosity is tied and the measurement named to decide it must be one that does; every
+interval it reports holds its best value.
 """
 
 import json

@@ -25,7 +25,6 @@ from __future__ import annotations
 import itertools
 import math
 from dataclasses import replace
-from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -34,9 +33,6 @@ from .observables import AuxGroup
 from .outcome import DecidingMeasurement, Discrepancy
 from .settings import DiscrepancySettings
 from .tables import resistance_name
-
-if TYPE_CHECKING:                                         # pragma: no cover
-    from ..inference.measurements import Measurements
 
 __all__ = ["DecidingMeasurement", "tied_set", "rank_measurements", "deciding_set",
            "unseparated", "MEASUREMENTS"]
@@ -207,8 +203,7 @@ def _pair_separation(sep: dict[tuple[str, str], float], a: str, b: str) -> float
     return min(sep[(a, b)], sep[(b, a)])
 
 
-def rank_measurements(d: Discrepancy, st: DiscrepancySettings,
-                      measurements: "Measurements | None" = None
+def rank_measurements(d: Discrepancy, st: DiscrepancySettings
                       ) -> list[DecidingMeasurement]:
     """The auxiliary measurements the table lacks, ranked by the pairs of tied models
     (:attr:`Discrepancy.tied`) they are expected to separate by the BIC margin, then by

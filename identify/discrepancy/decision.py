@@ -148,7 +148,7 @@ def find_discrepancy(measurements: Measurements, *,
     _decide(out, settings)
     out.tied = tied_set(out, settings)
     if len(out.tied) >= 2:
-        out.deciding = rank_measurements(out, settings, measurements)
+        out.deciding = rank_measurements(out, settings)
         _say_tied(out, settings)
     if out.verdict != "named":
         _add_model_form(out)
