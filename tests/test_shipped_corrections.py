@@ -263,3 +263,30 @@ def test_itr_corrections_build_and_show_on_a_tiny_plan(tmp_path, capsys):
     assert main(["corrections", "show", str(out / "corrections.json")]) == 0
     shown = capsys.readouterr().out
     assert "Al2O3-60" in shown and "fit Al2O3: fractions 0.550-0.600" in shown
+
+
+@pytest.mark.parametrize("name, content, why", [
+    ("hello.txt", "hello", ("is not a corrections table (not JSON: Expecting value: line 1 "
+                            "column 1 (char 0))")),
+    ("keys.json", '{"systems": {}}', "is not a corrections table (no 'provenance', 'points')"),
+    ("list.json", "[1, 2]", ("is not a corrections table (a JSON list, not an object with "
+                             "provenance, systems, points)")),
+    ("types.json", '{"provenance": {}, "systems": [], "points": []}',
+     "is not a corrections table ('systems' is a JSON list, not an object)"),
+    ("none.json", None, "does not exist"),
+])
+def test_itr_corrections_show_of_no_corrections_table_is_one_line_naming_the_file(
+        tmp_path, capsys, name, content, why):
+    from itr_identify.cli.dispatch import main
+
+    path = tmp_path / name
+    if content is not None:
+        path.write_text(content)
+    assert main(["corrections", "show", str(path)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err == [f"itr: error: file: {str(path)!r} {why}"]
+    with pytest.raises(ValueError, match=r"^path: .* " + why.split(" (")[0]):
+        ShippedCorrections.load(path)
+    if content is not None and name != "hello.txt":
+        with pytest.raises(ValueError, match=r"^data: not a corrections table \("):
+            ShippedCorrections(json.loads(content))

@@ -57,9 +57,9 @@ def _show(args: argparse.Namespace) -> int:
     from ..forward.shipped import ShippedCorrections
 
     try:
-        table = ShippedCorrections.load(args.file)
-    except (OSError, ValueError) as exc:
-        raise CLIError(f"file: {exc}", 2) from None
+        table = ShippedCorrections.load(args.file, argument="file")
+    except ValueError as exc:
+        raise CLIError(str(exc), 2) from None
     prov = table.provenance
     voxels = prov.get("voxels_per_system_um", prov.get("voxels_um"))
     print(f"corrections {prov.get('plan')} ({prov.get('date')}, commit "

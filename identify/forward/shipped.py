@@ -327,23 +327,77 @@ def _local_fit(points: tuple[dict, ...], fit: Mapping[str, Any]) -> tuple[np.nda
     return X, coef
 
 
+#: The top-level entries of a corrections table and the JSON type each must have.
+_TABLE_KEYS = {"provenance": dict, "systems": dict, "points": list}
+#: JSON's names of the Python types :func:`json.loads` gives.
+_JSON_NAMES = {dict: "object", list: "list", str: "string", int: "number", float: "number",
+               bool: "true/false", type(None): "null"}
+
+
+def _not_a_table(data: object) -> str | None:
+    """Why ``data`` (a file's parsed JSON) is no corrections table, or None where it is one
+    (its top-level entries: :data:`_TABLE_KEYS`)."""
+    if not isinstance(data, dict):
+        return (f"a JSON {_JSON_NAMES.get(type(data), 'value')}, not an object with "
+                f"{', '.join(_TABLE_KEYS)}")
+    missing = [k for k in _TABLE_KEYS if k not in data]
+    if missing:
+        return f"no {', '.join(repr(k) for k in missing)}"
+    for key, kind in _TABLE_KEYS.items():
+        if not isinstance(data[key], kind):
+            return f"{key!r} is a JSON {_JSON_NAMES.get(type(data[key]), 'value')}, not " \
+                   f"{'an object' if kind is dict else 'a list'}"
+    return None
+
+
+def _read_table(path: str | Path, argument: str) -> dict[str, Any]:
+    """The parsed corrections table at ``path``; a ValueError naming ``argument`` and the path
+    where it is no readable file or no corrections table."""
+    p = Path(path)
+    if not p.exists():
+        raise ValueError(f"{argument}: {str(p)!r} does not exist")
+    if not p.is_file():
+        raise ValueError(f"{argument}: {str(p)!r} is not a file")
+    try:
+        data = json.loads(p.read_text(encoding="utf-8"))
+    except UnicodeDecodeError:
+        raise ValueError(f"{argument}: {str(p)!r} is not a corrections table (not UTF-8 "
+                         "text)") from None
+    except json.JSONDecodeError as exc:
+        raise ValueError(f"{argument}: {str(p)!r} is not a corrections table (not JSON: "
+                         f"{exc})") from None
+    except OSError as exc:
+        raise ValueError(f"{argument}: cannot read {str(p)!r} ({exc.strerror})") from None
+    why = _not_a_table(data)
+    if why:
+        raise ValueError(f"{argument}: {str(p)!r} is not a corrections table ({why})")
+    return data
+
+
 class ShippedCorrections:
     """The corrections file: per filler system a fit of ``c(phi, R)`` and its range."""
 
     def __init__(self, data: Mapping[str, Any]) -> None:
-        if "systems" not in data or "provenance" not in data:
-            raise ValueError("data: expected a corrections file with 'systems' and "
-                             "'provenance'")
+        why = _not_a_table(dict(data) if isinstance(data, Mapping) else data)
+        if why:
+            raise ValueError(f"data: not a corrections table ({why})")
         self.data = dict(data)
 
     @classmethod
-    def load(cls, path: str | Path | None = None) -> "ShippedCorrections":
-        """The file at ``path`` (default: the one shipped in the package)."""
+    def load(cls, path: str | Path | None = None, *,
+             argument: str = "path") -> ShippedCorrections:
+        """The corrections table at ``path`` (default: the one shipped in the package).
+
+        Raises
+        ------
+        ValueError
+            Naming ``argument`` and the path: no such file, not JSON, or JSON that is no
+            corrections table (no ``provenance``, ``systems`` and ``points``).
+        """
         if path is None:
             text = resources.files("itr_identify").joinpath("data", SHIPPED_FILE).read_text()
-        else:
-            text = Path(path).read_text()
-        return cls(json.loads(text))
+            return cls(json.loads(text))
+        return cls(_read_table(path, argument))
 
     @property
     def provenance(self) -> dict[str, Any]:
