@@ -2,13 +2,15 @@
 
 from __future__ import annotations
 
+import difflib
 import math
 import re
+from collections.abc import Iterable
 
 import numpy as np
 
-__all__ = ["finite_number", "real_number", "phase_name", "PhysicalScaleWarning",
-           "VoxelContactWarning"]
+__all__ = ["PhysicalScaleWarning", "VoxelContactWarning", "finite_number", "phase_name",
+           "real_number", "unknown_key"]
 
 
 class PhysicalScaleWarning(UserWarning):
@@ -54,3 +56,32 @@ def phase_name(name: object, argument: str) -> str:
                          f"starting with a letter (no '_': it separates the parts of "
                          f"parameter names such as R_Al2O3_silicone), got {name!r}")
     return name
+
+
+def unknown_key(given: Iterable[str], known: Iterable[str], *, detail: str = "") -> str | None:
+    """The message for the first key of ``given`` (in sorted order) that ``known`` lacks, or
+    None where every key is known: the one wording of an unknown key in a settings file.
+
+    Parameters
+    ----------
+    given : iterable of str
+        The keys a file's table holds (a dict gives its keys).
+    known : iterable of str
+        The keys that table may hold.
+    detail : str, optional
+        Words after the key, e.g. ``" for kind 'grid'"``.
+
+    Returns
+    -------
+    str or None
+        ``unknown key 'voxl_um' (did you mean 'voxel_um'? known: box_um, voxel_um)``; the
+        "did you mean" only where a known key is close (:func:`difflib.get_close_matches`).
+    """
+    names = sorted(str(k) for k in known)
+    unknown = sorted(str(k) for k in given if str(k) not in names)
+    if not unknown:
+        return None
+    key = unknown[0]
+    near = difflib.get_close_matches(key, names, n=1)
+    hint = f"did you mean {near[0]!r}? " if near else ""
+    return f"unknown key {key!r}{detail} ({hint}known: {', '.join(names)})"

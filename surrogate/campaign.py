@@ -65,6 +65,7 @@ from typing import Any
 import numpy as np
 
 from itr_fv import Materials
+from itr_fv.checks import unknown_key
 from itr_fv.io import read_toml
 from itr_fv.materials import paper_data
 from itr_fv.materials.formulation_names import UnknownFormulationError, formulation_name
@@ -165,9 +166,9 @@ class Campaign:
         """Build and check a campaign from the structure of the TOML file."""
         if not isinstance(data, dict):
             raise CampaignError("expected a table of campaign keys")
-        unknown = sorted(set(data) - _TOP_KEYS)
+        unknown = unknown_key(data, _TOP_KEYS)
         if unknown:
-            raise CampaignError(f"unknown key {unknown[0]!r} (known: {sorted(_TOP_KEYS)})")
+            raise CampaignError(unknown)
         for key in ("box_um", "voxel_um", "formulation", "design"):
             if key not in data:
                 raise CampaignError(f"missing key {key!r}")
@@ -336,10 +337,9 @@ def _base(table: Any) -> dict[str, float]:
 def _formulation(entry: Any, i: int) -> Formulation:
     if not isinstance(entry, dict):
         raise CampaignError(f"formulation {i}: expected a table")
-    unknown = sorted(set(entry) - {"name", "fractions", "psd"})
+    unknown = unknown_key(entry, ("name", "fractions", "psd"))
     if unknown:
-        raise CampaignError(f"formulation {i}: unknown key {unknown[0]!r} (known: fractions, "
-                            "name, psd)")
+        raise CampaignError(f"formulation {i}: {unknown}")
     name = entry.get("name")
     if not isinstance(name, str) or not _NAME.match(name):
         raise CampaignError(f"formulation {i}: name must be letters, digits and . + -, got "
@@ -382,10 +382,9 @@ def _design(entry: Any) -> dict[str, Any]:
         kind = entry.get("kind") if isinstance(entry, dict) else entry
         raise CampaignError(f"design.kind: expected one of {sorted(_DESIGN_KEYS)}, got {kind!r}")
     kind = entry["kind"]
-    unknown = sorted(set(entry) - _DESIGN_KEYS[kind])
+    unknown = unknown_key(entry, _DESIGN_KEYS[kind], detail=f" for kind {kind!r}")
     if unknown:
-        raise CampaignError(f"design: unknown key {unknown[0]!r} for kind {kind!r} (known: "
-                            f"{sorted(_DESIGN_KEYS[kind])})")
+        raise CampaignError(f"design: {unknown}")
     needed = sorted(_DESIGN_KEYS[kind] - {"kind", "seed"} - set(entry))
     if needed:
         raise CampaignError(f"design: kind {kind!r} needs {needed[0]!r}")

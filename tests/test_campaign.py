@@ -1,6 +1,7 @@
 """Campaigns on a real Dask cluster with real Parquet files (issue 10)."""
 
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -183,7 +184,15 @@ def _set_fraction(d: dict, value: float) -> None:
 
 # (change to the SMALL campaign, text the one error line must hold)
 BAD = [
-    (lambda d: d.update(bogus=1), "unknown key 'bogus'"),
+    (lambda d: d.update(bogus=1),
+     ("unknown key 'bogus' (known: base, block_size, box_um, contact, cut_voxel_um, design, "
+      "formulation, matrix, max_diameter_box_ratio, min_gap_um, name, replicas, seed, solver, "
+      "threads_per_worker, tol, voxel_um)")),
+    (lambda d: d.update(voxl_um=0.25),
+     "unknown key 'voxl_um' (did you mean 'voxel_um'? known: base, block_size, box_um, "),
+    (lambda d: d["formulation"][0].update(fraction={"Al2O3": 0.4}),
+     ("formulation 0: unknown key 'fraction' (did you mean 'fractions'? known: fractions, name, "
+      "psd)")),
     (lambda d: d.pop("formulation"), "missing key 'formulation'"),
     (lambda d: d.pop("box_um"), "missing key 'box_um'"),
     (lambda d: d.update(base={"R_Al2O3_silicone": -1e-8}), "R_Al2O3_silicone' must be >= 0"),
@@ -260,7 +269,8 @@ def test_unreachable_scheduler_and_a_folder_of_another_campaign_are_refused(tmp_
 
 
 def test_campaign_checks_name_the_key():
-    with pytest.raises(CampaignError, match="design: unknown key 'bounds'"):
+    with pytest.raises(CampaignError, match=re.escape(
+            "design: unknown key 'bounds' for kind 'grid' (known: kind, values)")):
         Campaign.from_dict({**_small_dict(), "design": {"kind": "grid", "values": {},
                                                          "bounds": {}}})
     table4 = Campaign.from_dict({**_small_dict(), "design": {"kind": "table4"}})

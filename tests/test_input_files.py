@@ -10,6 +10,7 @@ import sys
 import numpy as np
 import pytest
 
+from itr_fv.checks import unknown_key
 from itr_fv.materials import paper_data
 from itr_identify.cli import main
 from itr_identify.inference.formulations import formulation_name
@@ -130,3 +131,12 @@ def test_identify_refuses_a_near_miss_in_one_line_with_exit_2(tmp_path):
                         "unknown; did you mean 'Al2O3-60'? (the digit 0 for the letter O at "
                         "character 4)\n")
     assert not (tmp_path / "o").exists()
+
+
+def test_an_unknown_key_of_a_settings_file_gets_a_did_you_mean_and_the_known_keys():
+    known = ("voxel_um", "box_um", "seed")
+    assert unknown_key({"box_um": 6.0, "voxl_um": 0.25}, known) == \
+        "unknown key 'voxl_um' (did you mean 'voxel_um'? known: box_um, seed, voxel_um)"
+    assert unknown_key({"zzz": 1, "bogus": 1}, known, detail=" for kind 'grid'") == \
+        "unknown key 'bogus' for kind 'grid' (known: box_um, seed, voxel_um)"
+    assert unknown_key({"seed": 1}, known) is None

@@ -41,8 +41,12 @@ def test_other_fields_are_checked_by_name():
             RVESpec(12.0, 0.25, **change)
     spec = RVESpec(12.0, 0.25, seed=4)
     assert RVESpec.from_dict(spec.to_dict()) == spec
-    with pytest.raises(ValueError, match="colour"):
+    with pytest.raises(ValueError, match=r"^unknown key 'colour' of an RVE specification "
+                                         r"\(known: box_um, cut_voxel_um, "):
         RVESpec.from_dict({**spec.to_dict(), "colour": 1})
+    with pytest.raises(ValueError, match=r"^unknown key 'voxel' of an RVE specification "
+                                         r"\(did you mean 'voxel_um'\? known: "):
+        RVESpec.from_dict({**spec.to_dict(), "voxel": 0.25})
 
 
 def test_build_rve_packs_replica_r_with_seed_plus_r():

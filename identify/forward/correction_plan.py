@@ -38,6 +38,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from itr_fv.checks import unknown_key
 from itr_fv.io import read_toml
 from itr_fv.rve.spec import RVESpec
 from itr_fv.solvers.choice import DEFAULT_SOLVER, check_solver
@@ -91,9 +92,9 @@ class CorrectionPlan:
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> "CorrectionPlan":
-        unknown = sorted(set(data) - _TOP)
+        unknown = unknown_key(data, _TOP)
         if unknown:
-            raise ValueError(f"unknown key {unknown[0]!r} (known: {sorted(_TOP)})")
+            raise ValueError(unknown)
         voxels = tuple(float(v) for v in data.get("voxels_um", ()))
         if len(voxels) != 2 or not 0 < voxels[1] < voxels[0]:
             raise ValueError(f"voxels_um: expected [coarse, fine] edges in um with coarse > "
@@ -104,9 +105,12 @@ class CorrectionPlan:
                              f"of the correction's uncertainty), got {packings!r}")
         systems = []
         for i, s in enumerate(data.get("system", [])):
-            bad = sorted(set(s) - _SYSTEM - _SYSTEM_OPTIONAL) or sorted(_SYSTEM - set(s))
-            if bad:
-                raise ValueError(f"system {i}: unknown or missing key {bad[0]!r}")
+            unknown = unknown_key(s, _SYSTEM | _SYSTEM_OPTIONAL)
+            if unknown:
+                raise ValueError(f"system {i}: {unknown}")
+            missing = sorted(_SYSTEM - set(s))
+            if missing:
+                raise ValueError(f"system {i}: missing key {missing[0]!r}")
             own = tuple(float(v) for v in s.get("voxels_um", ())) or None
             bias_from = tuple(str(b) for b in s.get("bias_from", ()))
             if own is not None and len(own) == 1 and not bias_from:

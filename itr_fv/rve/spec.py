@@ -19,6 +19,8 @@ import math
 from dataclasses import asdict, dataclass, fields, replace
 from typing import Any
 
+from ..checks import unknown_key
+
 __all__ = ["RVESpec", "voxels_per_edge", "MIN_VOXELS_PER_EDGE", "MAX_DIAMETER_BOX_RATIO",
            "PACKING_ATTEMPTS", "SEED_STRIDE", "MIN_LENGTH_UM", "MAX_LENGTH_UM"]
 
@@ -176,11 +178,9 @@ class RVESpec:
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> "RVESpec":
         """The spec of :meth:`to_dict`'s form (unknown keys: ValueError naming the key)."""
-        known = {f.name for f in fields(cls)}
-        unknown = sorted(set(data) - known)
+        unknown = unknown_key(data, cls.field_names(), detail=" of an RVE specification")
         if unknown:
-            raise ValueError(f"{unknown[0]}: not a key of an RVE specification "
-                             f"(known: {sorted(known)})")
+            raise ValueError(unknown)
         return cls(**data)
 
     @classmethod
