@@ -1,14 +1,11 @@
-"""Safe file output: atomic writes, output-path checks, a run manifest written last.
+"""Safe file output: atomic writes and output-path checks.
 
 Every file the package writes goes through :func:`atomic_path`: the content is written to
 a temporary file in the destination folder and renamed onto the final name only when it is
 complete (``os.replace`` is atomic on one file system). A run killed part way (SIGTERM,
 SIGKILL, a full disk) therefore leaves either the previous file or no file under the final
-name, never a truncated one. A folder of results is closed by :func:`write_manifest`
-(``manifest.json``: inputs, package and library versions, files with sizes and SHA-256),
-written last: a folder whose manifest is missing, or whose files do not match it, holds an
-unfinished or mixed run. :func:`begin_run` removes a previous run's manifest and the files it
-listed before a new run writes into the same folder.
+name, never a truncated one. Who may write into a results folder, and its ``manifest.json``,
+are :mod:`itr_fv.run_folder`'s business (it watches the writes made here).
 """
 
 from __future__ import annotations
@@ -17,18 +14,25 @@ import contextlib
 import hashlib
 import json
 import os
-import platform
-import sys
 import tempfile
-from collections.abc import Iterator, Mapping, Sequence
-from datetime import datetime, timezone
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
-__all__ = ["output_file", "atomic_path", "write_text", "sha256", "begin_run", "counted",
-           "write_manifest", "read_manifest", "MANIFEST"]
+__all__ = ["output_file", "atomic_path", "write_text", "sha256", "counted", "read_manifest",
+           "read_toml", "watch_writes", "MANIFEST", "TMP_PREFIX"]
 
 MANIFEST = "manifest.json"
-_TMP_PREFIX = ".itr-partial-"
+#: Name prefix of the temporary file of a write in progress.
+TMP_PREFIX = ".itr-partial-"
+#: Called with the final path of every file :func:`atomic_path` has put in place.
+_WATCHERS: list[Callable[[Path], None]] = []
+
+
+def watch_writes(callback: Callable[[Path], None]) -> None:
+    """Call ``callback(path)`` after every file :func:`atomic_path` puts in place (the run
+    folders of :mod:`itr_fv.run_folder` record their files this way)."""
+    if callback not in _WATCHERS:
+        _WATCHERS.append(callback)
 
 
 def output_file(path: str | os.PathLike, suffix: str | None = None,
@@ -65,7 +69,7 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     """
     final = Path(path)
     final.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=_TMP_PREFIX + final.stem + ".", suffix=final.suffix,
+    fd, tmp = tempfile.mkstemp(prefix=TMP_PREFIX + final.stem + ".", suffix=final.suffix,
                                dir=final.parent)
     os.close(fd)
     tmp_path = Path(tmp)
@@ -79,6 +83,8 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
         with contextlib.suppress(OSError):
             tmp_path.unlink()
         raise
+    for watcher in _WATCHERS:
+        watcher(final)
 
 
 def _umask() -> int:
@@ -125,66 +131,6 @@ def read_manifest(folder: str | os.PathLike) -> dict | None:
         return json.loads(p.read_text(encoding="utf-8"))
     except (OSError, ValueError):
         return None
-
-
-def begin_run(folder: str | os.PathLike) -> None:
-    """Prepare ``folder`` for a new run: drop an earlier run's manifest and listed files.
-
-    Only files named in the earlier manifest (and leftover temporary files of this module)
-    are removed; anything else the user keeps in the folder stays.
-    """
-    folder = Path(folder)
-    old = read_manifest(folder)
-    if old is not None:
-        (folder / MANIFEST).unlink(missing_ok=True)
-        for entry in old.get("files", []):
-            name = entry.get("path") if isinstance(entry, dict) else None
-            if name and "/" not in name and "\\" not in name and name != MANIFEST:
-                (folder / name).unlink(missing_ok=True)
-    if folder.is_dir():
-        for stale in folder.glob(_TMP_PREFIX + "*"):
-            stale.unlink(missing_ok=True)
-
-
-def _versions() -> dict[str, str]:
-    from importlib import metadata
-    out = {"python": platform.python_version()}
-    for dist in ("itr-composites", "numpy", "scipy", "numba", "pyamg", "pyvista"):
-        try:
-            out[dist] = metadata.version(dist)
-        except metadata.PackageNotFoundError:
-            continue
-    return out
-
-
-def write_manifest(folder: str | os.PathLike, files: Sequence[str | os.PathLike],
-                   inputs: Mapping[str, object], command: Sequence[str] | None = None) -> Path:
-    """Write ``folder/manifest.json`` last, closing a run; returns its path.
-
-    Parameters
-    ----------
-    folder : path
-        The results folder.
-    files : sequence of paths
-        Files of this run (inside ``folder``); each is listed with size and SHA-256.
-    inputs : mapping
-        The run's settings (JSON-serialisable).
-    command : sequence of str, optional
-        The command line (default ``sys.argv``).
-    """
-    folder = Path(folder)
-    entries = []
-    for f in files:
-        p = Path(f)
-        entries.append({"path": p.name, "bytes": p.stat().st_size, "sha256": sha256(p)})
-    manifest = {
-        "created": datetime.now(timezone.utc).isoformat(timespec="seconds"),
-        "command": list(sys.argv if command is None else command),
-        "inputs": dict(inputs),
-        "versions": _versions(),
-        "files": entries,
-    }
-    return write_text(folder / MANIFEST, json.dumps(manifest, indent=2) + "\n")
 
 
 def counted(n: int, noun: str, plural: str | None = None) -> str:

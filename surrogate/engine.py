@@ -70,7 +70,8 @@ from .store import rve_id, tensor_columns, tensor_of
 
 __all__ = ["RVEData", "SolveRequest", "SolveResult", "SolveStore", "SolveEngine",
            "open_client", "ready_workers",
-           "worker_memory_limit", "geometry_builds", "clear_problem_cache", "solve_row"]
+           "worker_memory_limit", "geometry_builds", "clear_problem_cache", "solve_row",
+           "default_workers", "MAX_DEFAULT_WORKERS"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -417,6 +418,16 @@ def _gpu_refusal(solver: str, why: str, scheduler: str | None = None) -> str:
             f"{others}), or use --scheduler with GPU workers started as {start}")
 
 
+#: Local Dask workers at most where none are asked for.
+MAX_DEFAULT_WORKERS = 4
+
+
+def default_workers() -> int:
+    """Local Dask workers where none are asked for: the cores, at most
+    :data:`MAX_DEFAULT_WORKERS` (fewer where memory is short: :func:`open_client`)."""
+    return max(1, min(os.cpu_count() or 1, MAX_DEFAULT_WORKERS))
+
+
 def open_client(workers: int | None, scheduler: str | None, *, memory_per_worker: int,
                 echo: Callable[[str], None] = print, solver: str | None = None):
     """A dask client on ``scheduler``, or on a new LocalCluster of ``workers`` processes
@@ -451,7 +462,7 @@ def open_client(workers: int | None, scheduler: str | None, *, memory_per_worker
                                                   "finds one)"))
         n = min(workers or devices, devices)
     else:
-        n = workers or max(1, min(os.cpu_count() or 1, 4))
+        n = workers or default_workers()
     avail = available_memory() or memory_per_worker
     fit = max(1, int(avail // memory_per_worker))
     if fit < n:

@@ -140,6 +140,18 @@ def _row(camp: Campaign, task: Task, index: int, rid: str, mat, res, wall: float
     return row
 
 
+def local_workers(workers: int | None) -> int | None:
+    """The local Dask workers of a run given ``workers`` (the ``--workers`` option): None
+    for 0 (every task in this process), else ``workers`` or, where it is None, the default
+    of :func:`itr_surrogate.engine.open_client` (the cores, at most
+    :data:`~itr_surrogate.engine.MAX_DEFAULT_WORKERS`)."""
+    from .engine import default_workers
+
+    if workers == 0:
+        return None
+    return workers or default_workers()
+
+
 def worker_memory(camp: Campaign) -> int:
     """Memory limit of a worker, bytes: the solver's peak estimate with the fields kept plus
     the warm-start fields of a block, sized by :func:`surrogate.engine.worker_memory_limit`

@@ -47,7 +47,7 @@ BAD = [
     (["demo", "--out", "afile"], 2, "--out: 'afile' is a file"),
     (["demo", "--out", "afile/sub"], 2, "--out: 'afile' is a file"),
     (["demo", "--out", "/proc/itr-out"], 2, "--out: cannot write"),
-    (["demo", "--out", "notes"], 2, "--out: 'notes' is not empty (1 entry) and holds no earlier"),
+    (["demo", "--out", "notes"], 2, "--out: 'notes' is not empty and it holds no itr manifest"),
     (["demo", "--voxel-um", "1.6", "--box-um", "16"], 2, "--voxel-um: 1.6 um voxels cannot"),
 ]
 
@@ -107,7 +107,7 @@ def test_version(tmp_path):
 
 def test_demo_end_to_end_small(tmp_path):
     """The demo writes vti, png, json and a manifest (last) that matches them; a rerun
-    into the same folder replaces the run."""
+    into the same folder replaces the run (tests/test_run_folder.py: what is refused)."""
     args = ["demo", "--box-um", "6", "--voxel-um", "0.25", "--fraction", "0.4", "--out", "d"]
     r = run_itr(*args, cwd=tmp_path)
     assert r.returncode == 0, r.stderr
@@ -126,12 +126,12 @@ def test_demo_end_to_end_small(tmp_path):
     assert grid.n_cells == 24**3 and "temperature_fluctuation_e1" in grid.cell_data
     k = summary["k_eff_W_per_mK"]
     assert 0.18 < k[0][0] < 30.0  # between the phases' conductivities
-    (out / "stale-note.txt").write_text("kept: not the package's file")
     r2 = run_itr(*args[:-2], "--seed", "2", "--out", "d", cwd=tmp_path)
     assert r2.returncode == 0, r2.stderr
     again = json.loads((out / "manifest.json").read_text())
-    assert again["inputs"]["seed"] == 2 and (out / "stale-note.txt").exists()
-    assert "--out: 'd' holds an earlier run's output: its files are replaced" in r2.stderr
+    assert again["inputs"]["seed"] == 2 and again["written_by"]["command"] == "itr demo"
+    assert "--out: 'd' holds an earlier 'itr demo' run: the files its manifest lists are " \
+        "replaced" in r2.stderr
 
 
 def test_sigterm_mid_run_leaves_no_output_folder(tmp_path):

@@ -15,7 +15,8 @@ from conftest import sc_sphere
 
 from itr_fv import Materials, Microstructure, homogenize
 from itr_fv.checks import PhysicalScaleWarning
-from itr_fv.io import atomic_path, begin_run, read_manifest, sha256, write_manifest, write_text
+from itr_fv.io import atomic_path, read_manifest, sha256, write_text
+from itr_fv.run_folder import begin_run, write_manifest
 
 
 @pytest.fixture(scope="module")
@@ -151,24 +152,28 @@ def test_sigterm_during_a_write_leaves_neither_a_truncated_file_nor_a_temp(tmp_p
 
 # ------------------------------------------------------------------------------ manifest
 def test_manifest_lists_files_with_checksums_and_a_rerun_clears_the_old_run(tmp_path):
+    begin_run(tmp_path, "demo")
     a = write_text(tmp_path / "a.json", '{"k": 1}\n')
     b = write_text(tmp_path / "b.txt", "second\n")
-    (tmp_path / "mine.txt").write_text("the user's own file")
-    write_manifest(tmp_path, [a, b], {"seed": 3})
+    write_manifest(tmp_path, [a, b], {"seed": 3}, job="demo")
     m = read_manifest(tmp_path)
-    assert m["inputs"] == {"seed": 3}
+    assert m["inputs"] == {"seed": 3} and m["state"] == "complete"
+    assert m["written_by"]["package"] == "itr-composites"
+    assert m["written_by"]["command"] == "itr demo"
     assert [f["path"] for f in m["files"]] == ["a.json", "b.txt"]
     assert m["files"][0]["sha256"] == sha256(a) and m["files"][1]["bytes"] == 7
     assert "numpy" in m["versions"] and "python" in m["versions"]
-    # a new run into the same folder first removes the manifest and the files it listed
-    begin_run(tmp_path)
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["mine.txt"]
-    assert read_manifest(tmp_path) is None
+    # a new run of the same command first removes the files the manifest listed
+    begin_run(tmp_path, "demo")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["manifest.json"]
+    assert read_manifest(tmp_path)["state"] == "running"
+    assert read_manifest(tmp_path)["files"] == []
 
 
 def test_manifest_is_valid_json_written_last(tmp_path):
+    begin_run(tmp_path, "demo")
     f = write_text(tmp_path / "x.txt", "x")
     time.sleep(0.01)
-    path = write_manifest(tmp_path, [f], {})
+    path = write_manifest(tmp_path, [f], {}, job="demo")
     assert json.loads(path.read_text())["files"][0]["path"] == "x.txt"
     assert os.path.getmtime(path) >= os.path.getmtime(f)

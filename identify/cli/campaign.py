@@ -11,14 +11,15 @@ import argparse
 from dataclasses import replace
 from pathlib import Path
 
-from .core import CLIError, Parser, number, open_campaign, solver_arguments, solver_option
+from .core import CLIError, Parser, number, open_campaign, planned, solver_arguments, solver_option
 
 __all__ = ["add_parser"]
 
 
 def _run(args: argparse.Namespace) -> int:
     from itr_surrogate.campaign import Campaign, CampaignError
-    from itr_surrogate.runner import run_campaign
+    from itr_surrogate.runner import local_workers, run_campaign
+    from itr_surrogate.workload import campaign_workload
 
     try:
         camp = Campaign.from_toml(args.file)
@@ -30,6 +31,8 @@ def _run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise CLIError(f"--out: {args.out!r} is a file, not a folder", 2)
+    planned(campaign_workload(camp, workers=local_workers(args.workers),
+                              scheduler=args.scheduler))
     try:
         summary = run_campaign(camp, out, workers=args.workers, scheduler=args.scheduler,
                                progress=not args.no_progress)

@@ -19,11 +19,11 @@ import contextlib
 import math
 import shutil
 import sys
-import tempfile
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 
-__all__ = ["CLIError", "Parser", "number", "FLAG_NAMES", "flagged", "output_folder",
+__all__ = ["CLIError", "Parser", "number", "FLAG_NAMES", "flagged", "output_folder", "planned",
+           "identification_plan",
            "engine_arguments", "engine_options", "solver_arguments", "solver_option",
            "open_campaign", "rve_arguments", "forward_settings", "read_table",
            "identification_arguments", "reproduce_settings"]
@@ -81,68 +81,74 @@ def flagged(message: str) -> str:
 
 
 @contextlib.contextmanager
-def output_folder(path: str) -> Iterator[Path]:
-    """Check and create the ``--out`` folder; remove it again if the run fails and we made it.
+def output_folder(path: str, job: str, *, folders: Sequence[str] = ()) -> Iterator[Path]:
+    """Claim the ``--out`` folder for ``itr <job>`` before any work
+    (:func:`itr_fv.run_folder.begin_run`: new, empty or an earlier run of the same command;
+    anything else refused in one line, nothing touched); remove it again if the run fails
+    and we made it, unless it keeps finished work in one of its owned ``folders``.
 
     Raises
     ------
     CLIError
-        (status 2) if ``path`` is a file, lies under a file, or cannot be written.
+        (status 2) if ``path`` is a file, lies under a file, holds anything that is not an
+        earlier ``itr <job>`` run's, or cannot be written.
     """
+    from itr_fv.io import counted
+    from itr_fv.run_folder import FolderRefused, begin_run, release
+
     out = Path(path)
-    if out.exists() and not out.is_dir():
-        raise CLIError(f"--out: {path!r} is a file, not a folder", 2)
-    for parent in out.parents:
-        if parent.exists():
-            if not parent.is_dir():
-                raise CLIError(f"--out: {str(parent)!r} is a file, not a folder", 2)
-            break
     created = not out.exists()
-    if not created:
-        _check_reused(out, path)
     try:
-        out.mkdir(parents=True, exist_ok=True)
-        with tempfile.TemporaryFile(dir=out):
-            pass
+        earlier = begin_run(out, job, folders=folders)
+    except FolderRefused as exc:
+        raise CLIError(str(exc), 2) from None
     except OSError as exc:
         if created:
-            with contextlib.suppress(OSError):
-                out.rmdir()
+            shutil.rmtree(out, ignore_errors=True)
         raise CLIError(f"--out: cannot write to {path!r} ({exc.strerror or exc})", 2) from None
+    if earlier is not None:
+        kept = sum(1 for f in folders for _ in (out / f).rglob("*.parquet"))
+        print(f"--out: {path!r} holds an earlier 'itr {job}' run: the files its manifest "
+              f"lists are replaced" + (f", {counted(kept, 'finished solve')} kept"
+                                       if folders else ""), file=sys.stderr)
     try:
         yield out
     except BaseException:
-        # a folder this run made goes again, unless it keeps finished full solves
-        # (out/solves) that a re-run reuses
-        if created and not (out / "solves").is_dir():
+        release(out)
+        # a folder this run made goes again, unless it keeps finished work
+        if created and not any((out / f).is_dir() and any((out / f).iterdir())
+                               for f in folders):
             shutil.rmtree(out, ignore_errors=True)
         raise
-
-
-def _check_reused(out: Path, path: str) -> None:
-    """Accept an existing ``--out`` folder only if it is empty or an earlier ``itr`` run's.
-
-    An earlier run's folder (it has ``manifest.json`` or ``solves/``) is reused: its listed
-    files are replaced and its finished solves kept, which is how a killed run resumes. Any
-    other non-empty folder is refused, so that no one's files get mixed with a run's.
-    """
-    from itr_fv.io import MANIFEST, counted
-
-    entries = [p for p in out.iterdir() if not p.name.startswith(".")]
-    if not entries:
-        return
-    if (out / MANIFEST).is_file() or (out / "solves").is_dir():
-        solves = out / "solves"
-        kept = sum(1 for _ in solves.rglob("*.parquet")) if solves.is_dir() else 0
-        print(f"--out: {path!r} holds an earlier run's output: its files are replaced, "
-              f"{counted(kept, 'finished solve')} kept", file=sys.stderr)
-        return
-    raise CLIError(f"--out: {path!r} is not empty ({counted(len(entries), 'entry', 'entries')}) "
-                   "and holds no earlier "
-                   "itr output; name a new or empty folder", 2)
+    release(out)
 
 
 # ------------------------------------------------------------------- shared by several commands
+def planned(workload) -> None:
+    """Refuse (status 2, one line) a :class:`~itr_surrogate.workload.Workload` that cannot
+    fit in memory, else print its plan: before any packing, solving or writing."""
+    from itr_surrogate.workload import WorkloadRefused
+
+    try:
+        workload.check()
+    except WorkloadRefused as exc:
+        raise CLIError(str(exc), 2) from None
+    print(workload.summary())
+
+
+def identification_plan(args: argparse.Namespace, settings, formulations, *,
+                        validation: bool) -> None:
+    """:func:`planned` for ``itr identify`` and ``itr reproduce``: the work of identifying
+    ``formulations`` with ``settings`` (a ReproduceSettings)."""
+    from ..forward.workload import identification_workload
+    from ..inference.formulations import fractions_of
+
+    planned(identification_workload(
+        settings.forward, {f: fractions_of(f) for f in formulations},
+        settings.parametrisations, validation=validation, workers=args.workers,
+        scheduler=args.scheduler))
+
+
 def open_campaign(folder: str):
     """The :class:`~itr_surrogate.store.CampaignStore` of a campaign folder (``DIR`` of
     ``itr campaign status|export`` and ``itr surrogate fit``); a CLIError (status 2) when

@@ -11,17 +11,26 @@ from __future__ import annotations
 
 import argparse
 import json
-from pathlib import Path
 
-from .core import CLIError, Parser, number, solver_arguments, solver_option
+from .core import (
+    CLIError,
+    Parser,
+    number,
+    output_folder,
+    planned,
+    solver_arguments,
+    solver_option,
+)
 
 __all__ = ["add_parser"]
 
 
 def _build(args: argparse.Namespace) -> int:
     from itr_fv.io import write_text
+    from itr_fv.run_folder import write_manifest
     from itr_surrogate.campaign import CampaignError
-    from itr_surrogate.runner import run_campaign
+    from itr_surrogate.runner import local_workers, run_campaign
+    from itr_surrogate.workload import Workload, campaign_workload
 
     from ..forward.correction_plan import CorrectionPlan
     from ..forward.shipped import assemble
@@ -35,19 +44,25 @@ def _build(args: argparse.Namespace) -> int:
     except ValueError as exc:
         raise CLIError(str(exc), 2) from None
     solver = solver_option(args, plan.solver)
-    out = Path(args.out)
-    if out.exists() and not out.is_dir():
-        raise CLIError(f"--out: {args.out!r} is a file, not a folder", 2)
+    campaigns = list(plan.campaigns(systems=systems, solver=solver, threads=args.threads))
+    planned(Workload(tuple(
+        campaign_workload(camp, label=folder).grids[0] for folder, camp in campaigns),
+        solver, local_workers(args.workers), args.scheduler))
     failed = 0
-    for folder, camp in plan.campaigns(systems=systems, solver=solver, threads=args.threads):
-        try:
-            summary = run_campaign(camp, out / folder, workers=args.workers,
-                                   scheduler=args.scheduler, progress=not args.no_progress)
-        except CampaignError as exc:
-            raise CLIError(str(exc), 2) from None
-        failed += summary.tasks_failed
-    data = assemble(plan, out, provenance={"solver": solver})
-    path = write_text(out / "corrections.json", json.dumps(data, indent=1) + "\n")
+    with output_folder(args.out, "corrections build",
+                       folders=[folder for folder, _ in campaigns]) as out:
+        for folder, camp in campaigns:
+            try:
+                summary = run_campaign(camp, out / folder, workers=args.workers,
+                                       scheduler=args.scheduler,
+                                       progress=not args.no_progress)
+            except CampaignError as exc:
+                raise CLIError(str(exc), 2) from None
+            failed += summary.tasks_failed
+        data = assemble(plan, out, provenance={"solver": solver})
+        path = write_text(out / "corrections.json", json.dumps(data, indent=1) + "\n")
+        write_manifest(out, [path], {"plan": args.file, "systems": list(systems or []),
+                                     "solver": solver}, job="corrections build")
     print(f"wrote {path} ({len(data['points'])} points, systems: "
           f"{', '.join(data['systems']) or 'none fitted yet'})")
     return 1 if failed else 0

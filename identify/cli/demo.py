@@ -6,7 +6,7 @@ import argparse
 
 from itr_fv.solvers.choice import DEFAULT_SOLVER
 
-from .core import CLIError, number, output_folder, solver_arguments, solver_option
+from .core import CLIError, number, output_folder, planned, solver_arguments, solver_option
 
 __all__ = ["add_parser"]
 
@@ -14,12 +14,13 @@ __all__ = ["add_parser"]
 def _run(args: argparse.Namespace) -> int:
     from itr_fv.rve.spec import RVESpec
 
-    from ..workflows.demo import DemoSettings, run_demo
+    from ..workflows.demo import DemoSettings, demo_workload, run_demo
 
     voxel = args.box_um / args.n if args.n is not None else args.voxel_um
     settings = DemoSettings(rve=RVESpec(box_um=args.box_um, voxel_um=voxel, seed=args.seed),
                             fraction=args.fraction, solver=solver_option(args), tol=args.tol)
-    with output_folder(args.out) as out:
+    planned(demo_workload(settings))
+    with output_folder(args.out, "demo") as out:
         try:
             run_demo(settings, out)
         except RuntimeError as exc:

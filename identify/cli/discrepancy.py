@@ -11,6 +11,7 @@ from .core import (
     engine_options,
     forward_settings,
     output_folder,
+    planned,
     read_table,
     rve_arguments,
 )
@@ -22,7 +23,9 @@ def _run(args: argparse.Namespace) -> int:
     from ..discrepancy.effects import by_key, default_effects
     from ..discrepancy.observables import auxiliary_groups
     from ..discrepancy.settings import DiscrepancySettings
+    from ..discrepancy.tables import n_solves
     from ..forward.fidelity import faithful_for
+    from ..forward.workload import tables_workload
     from ..inference.formulations import fractions_of
     from ..inference.measurements import read_measurements
     from ..workflows.discrepancy import run_discrepancy
@@ -42,7 +45,12 @@ def _run(args: argparse.Namespace) -> int:
         auxiliary_groups(meas, {f: fractions_of(f) for f in meas.formulations})
     except ValueError as exc:
         raise CLIError("MEASUREMENTS: " + str(exc).removeprefix("measurements: "), 2) from None
-    with output_folder(args.out) as out:
+    singles = {f: c for f, c in ((f, fractions_of(f)) for f in meas.formulations)
+               if len(c) == 1}
+    planned(tables_workload(settings, singles, solves=n_solves(len(singles), settings,
+                                                               effects),
+                            workers=args.workers, scheduler=args.scheduler))
+    with output_folder(args.out, "discrepancy", folders=("solves",)) as out:
         run_discrepancy(meas, settings, out, effects=effects, progress=not args.no_progress,
                         **engine_options(args))
     return 0

@@ -7,6 +7,7 @@ import argparse
 from .core import (
     engine_options,
     identification_arguments,
+    identification_plan,
     output_folder,
     read_table,
     reproduce_settings,
@@ -22,7 +23,8 @@ def _run(args: argparse.Namespace) -> int:
     settings = reproduce_settings(args)
     meas = read_table(args.measurements,
                       read_tester_readings if args.readings else read_measurements)
-    with output_folder(args.out) as out:
+    identification_plan(args, settings, meas.formulations, validation=False)
+    with output_folder(args.out, "identify", folders=("solves",)) as out:
         run_identify(meas, settings, out, progress=not args.no_progress,
                      **engine_options(args))
     return 0

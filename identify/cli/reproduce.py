@@ -4,16 +4,24 @@ from __future__ import annotations
 
 import argparse
 
-from .core import engine_options, identification_arguments, output_folder, reproduce_settings
+from .core import (
+    engine_options,
+    identification_arguments,
+    identification_plan,
+    output_folder,
+    reproduce_settings,
+)
 
 __all__ = ["add_parser"]
 
 
 def _run(args: argparse.Namespace) -> int:
+    from ..inference.measurements import read_measurements
     from ..workflows.reproduce import run_reproduce
 
     settings = reproduce_settings(args)
-    with output_folder(args.out) as out:
+    identification_plan(args, settings, read_measurements().formulations, validation=True)
+    with output_folder(args.out, "reproduce", folders=("solves",)) as out:
         run_reproduce(settings, out, progress=not args.no_progress, **engine_options(args))
     return 0
 

@@ -29,7 +29,7 @@ from itr_fv.materials import paper_data
 from itr_fv.rve.spec import RVESpec
 from itr_fv.solvers.choice import DEFAULT_SOLVER, check_solver
 
-__all__ = ["DemoSettings", "run_demo", "PAPER_R", "VOXEL_BIAS", "DEMO_SCATTER"]
+__all__ = ["DemoSettings", "run_demo", "demo_workload", "PAPER_R", "VOXEL_BIAS", "DEMO_SCATTER"]
 
 # The paper's identified resistances (Table 5), m^2 K/W, and its conductivities, W/(m K).
 PAPER_R = paper_data.paper_resistances()
@@ -126,22 +126,38 @@ def scatter_note(settings: "DemoSettings") -> str:
             f"(range){at}")
 
 
+def _filler(settings: DemoSettings):
+    from itr_fv.rve import FillerSpec
+    return FillerSpec.from_table1("Al2O3", settings.fraction)
+
+
+def demo_workload(settings: DemoSettings):
+    """The demo's work (:class:`itr_surrogate.workload.Workload`): one RVE, one solve that
+    keeps its fields."""
+    from itr_surrogate.workload import Grid, Workload, expected_particles
+
+    rve = settings.rve
+    return Workload((Grid("demo RVE", rve.box_um, rve.voxel_um, rves=1, solves=1,
+                          particles=expected_particles(rve, [_filler(settings)]),
+                          fields=True),), settings.solver)
+
+
 def run_demo(settings: DemoSettings, out: Path, echo=print) -> list[Path]:
     """Generate, solve and write the demo; returns the files written (manifest last).
 
     ``out`` must exist and be writable; earlier demo files in it are replaced.
     """
     from itr_fv import Materials
-    from itr_fv.io import begin_run, write_manifest, write_text
-    from itr_fv.rve import FillerSpec, build_rve
+    from itr_fv.io import write_text
+    from itr_fv.rve import build_rve
+    from itr_fv.run_folder import begin_run, write_manifest
     from itr_fv.solvers.choice import solver_backend
     from itr_fv.solvers.driver import homogenize
 
-    begin_run(out)
+    begin_run(out, "demo")
     t0 = time.perf_counter()
     matrix = paper_data.PAPER_SYSTEM.matrix
-    ms, _ = build_rve(settings.rve, [FillerSpec.from_table1("Al2O3", settings.fraction)], 0,
-                      matrix=matrix)
+    ms, _ = build_rve(settings.rve, [_filler(settings)], 0, matrix=matrix)
     echo(f"RVE: {settings.n}^3 voxels of {settings.voxel_um:g} um ({settings.box_um:g} um box), "
          f"{ms.n_particles} Al2O3 particles, {ms.volume_fractions()['Al2O3']:.3f} by volume, "
          f"seed {settings.seed} ({time.perf_counter() - t0:.1f} s)")
@@ -168,6 +184,6 @@ def run_demo(settings: DemoSettings, out: Path, echo=print) -> list[Path]:
                "rve_scatter_percent": DEMO_SCATTER}
     js = write_text(out / "demo.json", json.dumps(summary, indent=2) + "\n")
     files = [vti, png, js]
-    manifest = write_manifest(out, files, {"job": "demo", **settings.to_dict()})
+    manifest = write_manifest(out, files, settings.to_dict(), job="demo")
     echo(f"wrote {vti}, {png}, {js}, {manifest}")
     return files + [manifest]

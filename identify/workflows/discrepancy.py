@@ -7,7 +7,8 @@ import json
 from collections.abc import Callable
 from pathlib import Path
 
-from itr_fv.io import begin_run, write_manifest, write_text
+from itr_fv.io import write_text
+from itr_fv.run_folder import begin_run, write_manifest
 
 from ..discrepancy.best_point import corrector
 from ..discrepancy.decision import Discrepancy, find_discrepancy
@@ -38,7 +39,7 @@ def run_discrepancy(meas: Measurements, settings: DiscrepancySettings, out: Path
     comps = {f: fractions_of(f) for f in meas.formulations}
     auxiliary_groups(meas, comps)          # an auxiliary column without its noise: refused now
     out = Path(out)
-    begin_run(out)
+    begin_run(out, "discrepancy", folders=("solves",))
     singles = {f: c for f, c in comps.items() if len(c) == 1}
     effects = default_effects() if effects is None else list(effects)
     with open_engine(out, workers=workers, scheduler=scheduler, store=store,
@@ -56,10 +57,11 @@ def run_discrepancy(meas: Measurements, settings: DiscrepancySettings, out: Path
     lines += report_lines(d, settings)
     lines += ["", "Figure: `discrepancy.png` (relative error per group, before and after)."]
     files.append(write_text(out / "discrepancy.md", "\n".join(lines) + "\n"))
-    files.append(write_manifest(out, files, {"job": "discrepancy", "measurements": meas.source,
+    files.append(write_manifest(out, files, {"measurements": meas.source,
                                              "forward": settings.forward.to_dict(),
                                              "faithful": (settings.faithful.to_dict()
                                                           if settings.faithful else None),
-                                             "densities_g_per_cm3": d.densities}))
+                                             "densities_g_per_cm3": d.densities},
+                                job="discrepancy"))
     echo(f"discrepancy: {d.verdict}; wrote {out / 'discrepancy.md'}")
     return d

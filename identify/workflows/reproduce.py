@@ -20,7 +20,8 @@ from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
-from itr_fv.io import atomic_path, begin_run, counted, write_manifest, write_text
+from itr_fv.io import atomic_path, counted, write_text
+from itr_fv.run_folder import begin_run, write_manifest
 from itr_surrogate.engine import SolveEngine
 
 from ..forward.fidelity import CHEAP_REPLICAS, CHEAP_RVE, CHEAP_TOL, faithful_for, fidelity_name
@@ -151,6 +152,7 @@ def run_reproduce(settings: ReproduceSettings, out: Path, *, progress: bool = Tr
     Every full solve runs on the solve engine (:func:`open_engine`: in this process, on
     ``workers`` local processes or on the Dask ``scheduler``) and is kept in ``out/solves``.
     """
+    begin_run(out, "reproduce", folders=("solves",))
     with open_engine(out, workers=workers, scheduler=scheduler, store=store,
                      echo=echo) as engine:
         return _reproduce(settings, Path(out), progress, echo, engine)
@@ -158,7 +160,6 @@ def run_reproduce(settings: ReproduceSettings, out: Path, *, progress: bool = Tr
 
 def _reproduce(settings: ReproduceSettings, out: Path, progress: bool,
                echo: Callable[[str], None], engine: SolveEngine) -> list[Path]:
-    begin_run(out)
     t0 = time.perf_counter()
     meas = read_measurements()
     idents = _identify_all(meas, settings, progress, echo, engine)
@@ -199,9 +200,8 @@ def _reproduce(settings: ReproduceSettings, out: Path, progress: bool,
               "total (before the report)": wall}
     files.append(write_text(out / "report.md", _reproduce_markdown(
         head, idents, meas, validation, lofo, psd_fits, timing, settings)))
-    files.append(write_manifest(out, files, {"job": "reproduce", **settings.to_dict(),
-                                             "wall_s": round(wall, 1),
-                                             "engine": engine.summary()}))
+    files.append(write_manifest(out, files, {**settings.to_dict(), "wall_s": round(wall, 1),
+                                             "engine": engine.summary()}, job="reproduce"))
     echo(f"engine: {engine.summary()}")
     for line in headline_lines(head):
         echo(line)
@@ -286,9 +286,9 @@ def run_identify(meas: Measurements, settings: ReproduceSettings, out: Path, *,
     """Identification of a user's measurement table; returns the files written. Full
     solves as in :func:`run_reproduce` (kept in ``out/solves``)."""
     out = Path(out)
+    begin_run(out, "identify", folders=("solves",))
     with open_engine(out, workers=workers, scheduler=scheduler, store=store,
                      echo=echo) as engine:
-        begin_run(out)
         t0 = time.perf_counter()
         idents = _identify_all(meas, settings, progress, echo, engine)
         echo(f"engine: {engine.summary()}")
@@ -315,8 +315,8 @@ def _identify_report(meas: Measurements, settings: ReproduceSettings, out: Path,
     lines += [""] + report.residual_lines(idents)
     lines += ["", "## Identifiability", ""] + report.identifiability_lines(idents)
     files.append(write_text(out / "report.md", "\n".join(lines) + "\n"))
-    files.append(write_manifest(out, files, {"job": "identify", "measurements": meas.source,
-                                             **settings.to_dict()}))
+    files.append(write_manifest(out, files, {"measurements": meas.source,
+                                             **settings.to_dict()}, job="identify"))
     for line in headline_lines(head):
         echo(line)
     echo(f"identify: done in {time.perf_counter() - t0:.0f} s; wrote {_written(out, files)}")

@@ -63,6 +63,9 @@ class SolverChoice:
         Where its arrays live.
     summary : str
         One line for help texts.
+    seconds_per_voxel : float
+        Measured wall time of one load case per voxel at tol 1e-8, s (dense 60 % Al2O3,
+        about 80 CG iterations; the time estimate of :mod:`itr_surrogate.workload`).
     """
 
     name: str
@@ -70,6 +73,7 @@ class SolverChoice:
     options: Mapping[str, Any] = field(default_factory=dict)
     device: str = "cpu"
     summary: str = ""
+    seconds_per_voxel: float = 6e-6
 
     @property
     def resources(self) -> dict[str, int] | None:
@@ -82,14 +86,19 @@ def _registry(*choices: SolverChoice) -> Mapping[str, SolverChoice]:
     return MappingProxyType({c.name: c for c in choices})
 
 
-#: The registered short names.
+#: The registered short names. Seconds per voxel and load case: fft and fv from
+#: validation/results/bench_solvers.md (2-core CPU: 256^3 in 65.9 s, 128^3 in 36.8 s, three
+#: load cases), mg from the AlN-60 solves of validation/results/bench_gpu.md, gpu from an
+#: H200 (validation/results/gpu_issue39.md: 160^3 in 0.97 s); an unnamed backend is taken
+#: at fv's.
 SOLVERS = _registry(
-    SolverChoice("fft", "itr_fft", {}, "cpu", "numba FFT-preconditioned CG (the default)"),
+    SolverChoice("fft", "itr_fft", {}, "cpu", "numba FFT-preconditioned CG (the default)",
+                 1.5e-6),
     SolverChoice("mg", "itr_fft", {"preconditioner": "multigrid"}, "cpu",
-                 "numba CG with the particle-deflated multigrid (high contrast)"),
-    SolverChoice("fv", "itr_fv", {}, "cpu", "sparse assembly + pyamg (the reference)"),
+                 "numba CG with the particle-deflated multigrid (high contrast)", 3e-6),
+    SolverChoice("fv", "itr_fv", {}, "cpu", "sparse assembly + pyamg (the reference)", 6e-6),
     SolverChoice("gpu", "array_api", {"device": "cuda"}, "cuda",
-                 "array-API FFT-preconditioned CG on a CUDA device (CuPy)"),
+                 "array-API FFT-preconditioned CG on a CUDA device (CuPy)", 8e-8),
 )
 
 
