@@ -5,12 +5,12 @@ from __future__ import annotations
 import difflib
 import math
 import re
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
 
 import numpy as np
 
 __all__ = ["PhysicalScaleWarning", "VoxelContactWarning", "finite_number", "phase_name",
-           "real_number", "unknown_key"]
+           "real_number", "slip_hint", "unit_slip", "unknown_key"]
 
 
 class PhysicalScaleWarning(UserWarning):
@@ -85,3 +85,47 @@ def unknown_key(given: Iterable[str], known: Iterable[str], *, detail: str = "")
     near = difflib.get_close_matches(key, names, n=1)
     hint = f"did you mean {near[0]!r}? " if near else ""
     return f"unknown key {key!r}{detail} ({hint}known: {', '.join(names)})"
+
+
+def unit_slip(value: float, plausible: tuple[float, float],
+              slips: Mapping[str, float]) -> tuple[str, float] | None:
+    """The unit slip that explains a value outside its plausible range, or None.
+
+    Parameters
+    ----------
+    value : float
+        The value as read, in the unit its column or argument states.
+    plausible : (float, float)
+        The closed range of plausible values, in that unit.
+    slips : mapping of str to float
+        Per unit a user may have written the value in by mistake, the factor that takes a
+        number in that unit to the stated one (e.g. ``{"mW/(m K)": 1e-3}`` for a
+        conductivity in W/(m K)); tried in order.
+
+    Returns
+    -------
+    (str, float) or None
+        The first slip whose converted value is plausible, and that value; None where the
+        value is plausible or no slip makes it so (then the value is implausible for
+        another reason, and a unit hint would mislead).
+    """
+    lo, hi = plausible
+    if lo <= value <= hi:
+        return None
+    for unit, factor in slips.items():
+        if lo <= value * factor <= hi:
+            return unit, value * factor
+    return None
+
+
+def slip_hint(value: float, plausible: tuple[float, float], slips: Mapping[str, float],
+              unit: str, *, subject: str = "it", result: str = "that") -> str | None:
+    """``is it in mW/(m K)? (that would be 1.29 W/(m K))`` where :func:`unit_slip` finds a
+    slip explaining ``value``, else None. ``unit`` is the stated unit (``""`` for none);
+    ``subject`` names what may be in the other unit, ``result`` the corrected quantity."""
+    slip = unit_slip(value, plausible, slips)
+    if slip is None:
+        return None
+    name, converted = slip
+    return f"is {subject} in {name}? ({result} would be {converted:.3g}" \
+           f"{' ' + unit if unit else ''})"

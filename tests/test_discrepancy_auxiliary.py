@@ -104,7 +104,9 @@ def test_a_table_with_auxiliary_columns_reads_blank_cells_as_not_measured(tmp_pa
 
 @pytest.mark.parametrize("column, values, expected", [
     ("density_g_per_cm3", ["2.61", "2610", "2.75", "2.76", "2.9", "2.91"],
-     "density_g_per_cm3 2610 is outside 0.97 - 3.95 g/cm^3"),
+     ("density_g_per_cm3 2610 is outside 0.97 - 3.95 g/cm^3, what a sample of Al2O3-55 can "
+      "have (its matrix's to its densest filler's density); is it in kg/m^3? (that would be "
+      "2.61 g/cm^3)\n")),
     ("density_g_per_cm3", ["0.5", "2.6", "2.75", "2.76", "2.9", "2.91"],
      "density_g_per_cm3 0.5 is outside"),
     ("filler_mass_fraction", ["86", "0.86", "0.88", "0.88", "0.9", "0.9"],
@@ -127,7 +129,9 @@ def test_bad_auxiliary_values_are_refused_in_one_line_with_no_folder_left(
 
 
 @pytest.mark.parametrize("flag, expected", [
-    ("Al2O3=3950", "--density: density of Al2O3: 3950 g/cm^3 is outside"),
+    ("Al2O3=3950", ("--density: density of Al2O3: 3950 g/cm^3 is outside 0.5 - 25 g/cm^3, "
+                    "the range of a solid phase; is it in kg/m^3? (that would be 3.95 "
+                    "g/cm^3)\n")),
     ("Cu=8.9", "--density: densities: 'Cu' is not a phase"),
     ("Al2O3", "--density: expected PHASE=G_PER_CM3"),
 ])

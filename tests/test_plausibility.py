@@ -14,6 +14,8 @@ import pytest
 
 from itr_fv import Microstructure
 from itr_fv.analytic import hashin_shtrikman, hashin_shtrikman_multiphase
+from itr_fv.checks import slip_hint, unit_slip
+from itr_fv.materials.material_system import check_density
 from itr_fv.rve.spec import RVESpec
 from itr_identify.cli import main
 from itr_identify.inference.formulations import fractions_of
@@ -76,15 +78,50 @@ def test_k_in_milliwatts_is_refused_before_any_solve(tmp_path, capsys):
     csv.write_text(TABLE + "Al2O3-55,1,1290\nAl2O3-55,2,1300\nAl2O3-62,1,1700\n"
                    "Al2O3-62,2,1750\n")
     out = tmp_path / "o"
-    _one_line_refusal(capsys, ["identify", str(csv), "--out", str(out), *QUICK],
-                      "mw.csv line 2: k_W_per_mK 1290 W/(m K) is above", out)
+    lines = _one_line_refusal(capsys, ["identify", str(csv), "--out", str(out), *QUICK],
+                              "mw.csv line 2: k_W_per_mK 1290 W/(m K) is above", out)
+    assert lines[-1].endswith("; is it in mW/(m K)? (that would be 1.29 W/(m K))")
+
+
+def test_a_filler_like_conductivity_is_refused_with_the_range_and_no_unit_hint(tmp_path):
+    # 25 W/(m K) is above what Al2O3-60 can reach, but 25 mW/(m K) is below its matrix: no
+    # unit slip explains it, so the message states the range instead of asking about mW
+    csv = _write(tmp_path / "k25.csv", TABLE + "Al2O3-60,1,25\nAl2O3-60,2,24\n")
+    lo, hi = conductivity_range("Al2O3-60")
+    with pytest.raises(ValueError) as err:
+        read_measurements(csv)
+    assert str(err.value) == (
+        f"k25.csv line 2: k_W_per_mK 25 W/(m K) is above {hi:.3g} W/(m K), the most Al2O3-60 "
+        "can conduct at any interface resistance (Hashin-Shtrikman bound at perfect "
+        f"interfaces); a sample of Al2O3-60 can conduct {lo:g} - {hi:.3g} W/(m K)")
+    assert "mW" not in str(err.value)
+
+
+def test_a_unit_hint_only_where_the_unit_makes_the_value_plausible():
+    mw = {"mW/(m K)": 1e-3}
+    assert unit_slip(180.0, (0.1, 0.5), mw) == ("mW/(m K)", 0.18)   # a matrix in mW/(m K)
+    assert unit_slip(25.0, (0.18, 15.1), mw) is None               # a filler-like value
+    assert unit_slip(0.3, (0.1, 0.5), mw) is None                  # plausible as it is
+    # a resistance written in K mm^2/W where m^2 K/W is asked for: 1e6 times too big
+    assert slip_hint(2.2e-2, (1e-9, 1e-6), {"K m^2/W": 1e-3, "K mm^2/W": 1e-6}, "m^2 K/W") \
+        == "is it in K mm^2/W? (that would be 2.2e-08 m^2 K/W)"
+    assert slip_hint(1290.0, (0.18, 13.6), mw, "W/(m K)") == \
+        "is it in mW/(m K)? (that would be 1.29 W/(m K))"
+    with pytest.raises(ValueError, match=r"2500 g/cm\^3 is outside 0.5 - 25 g/cm\^3, the range "
+                                         r"of a solid phase; is it in kg/m\^3\? \(that would "
+                                         r"be 2.5 g/cm\^3\)$"):
+        check_density("density of X", 2500.0)
+    with pytest.raises(ValueError, match=r"1e\+06 g/cm\^3 is outside 0.5 - 25 g/cm\^3, the "
+                                         r"range of a solid phase$"):
+        check_density("density of X", 1e6)
 
 
 def test_k_above_the_bound_of_a_hybrid_is_refused(tmp_path):
     csv = tmp_path / "h.csv"
     bound = conductivity_range("Al2O3-30-AlN-30")[1]
     csv.write_text(TABLE + f"Al2O3-30-AlN-30,1,1.7\nAl2O3-30-AlN-30,2,{1.01 * bound:.4f}\n")
-    with pytest.raises(ValueError, match="line 3: k_W_per_mK .* mW"):
+    with pytest.raises(ValueError, match=r"line 3: k_W_per_mK .* W/\(m K\) is above .*; a "
+                                         r"sample of Al2O3-30-AlN-30 can conduct 0.18 - "):
         read_measurements(csv)
 
 
@@ -96,6 +133,8 @@ def test_k_below_the_matrix_is_one_warning_line_before_anything_else(tmp_path, c
                                        *QUICK], "line 4: k_W_per_mK is not a number")
     assert lines[0].startswith("itr: warning: low.csv line 2: k_W_per_mK 0.15")
     assert "below the matrix's own 0.18 W/(m K)" in lines[0]
+    assert lines[0].endswith(f"reach it; a sample of Al2O3-55 can conduct 0.18 - "
+                             f"{conductivity_range('Al2O3-55')[1]:.3g} W/(m K)")
     with pytest.warns(ImplausibleMeasurementWarning, match="line 3"):
         read_measurements(_write(tmp_path / "l2.csv", TABLE + "AlN-55,1,1.2\nAlN-55,2,0.1\n"))
 
@@ -121,14 +160,21 @@ def test_thickness_in_micrometres_is_refused_in_tester_readings(tmp_path, capsys
     csv = _write(tmp_path / "r.csv", text)
     _one_line_refusal(capsys, ["identify", str(csv), "--readings", "--out",
                                str(tmp_path / "o"), *QUICK],
-                      "r.csv line 2: thickness_mm 500 mm is outside the 0.01 - 20 mm")
+                      "r.csv line 2: thickness_mm 500 mm is outside the 0.01 - 20 mm of a "
+                      "thermal-interface sample; is it in um? (that would be 0.5 mm)")
 
 
 def test_thickness_in_metres_is_refused_in_a_measurement_table(tmp_path):
     csv = _write(tmp_path / "t.csv", TABLE.strip() + ",thickness_mm\n"
                  "Al2O3-55,1,1.2,0.0005\nAl2O3-55,2,1.3,0.0005\n")
-    with pytest.raises(ValueError, match=r"t.csv line 2: thickness_mm 0.0005 mm .* in m\?"):
+    with pytest.raises(ValueError, match=r"t.csv line 2: thickness_mm 0.0005 mm .*; is it in "
+                                         r"m\? \(that would be 0.5 mm\)$"):
         read_measurements(csv)
+    far = _write(tmp_path / "far.csv", TABLE.strip() + ",thickness_mm\n"
+                 "Al2O3-55,1,1.2,5e6\nAl2O3-55,2,1.3,1\n")
+    with pytest.raises(ValueError, match=r"thickness_mm 5e\+06 mm is outside the 0.01 - 20 mm "
+                                         r"of a thermal-interface sample$"):
+        read_measurements(far)      # not in um (5 m) nor in m: no unit hint
 
 
 def test_impedance_in_square_metres_is_refused_through_the_conductivity(tmp_path):
@@ -136,7 +182,9 @@ def test_impedance_in_square_metres_is_refused_through_the_conductivity(tmp_path
     csv = _write(tmp_path / "i.csv", "formulation,replicate,thickness_mm,"
                  "impedance_K_mm2_per_W\nAl2O3-55,1,0.5,4.2e-4\nAl2O3-55,1,1.0,8.1e-4\n"
                  "Al2O3-55,2,0.5,4.0e-4\nAl2O3-55,2,1.0,8.0e-4\n")
-    with pytest.raises(ValueError, match="lines 2-3: K = 1/slope of impedance_K_mm2_per_W"):
+    with pytest.raises(ValueError, match=r"lines 2-3: K = 1/slope of impedance_K_mm2_per_W .*; "
+                                         r"is impedance_K_mm2_per_W in K m\^2/W\? \(the "
+                                         r"conductivity would be 1.28 W/\(m K\)\)$"):
         read_tester_readings(csv)
 
 

@@ -37,7 +37,12 @@ import numpy as np
 from itr_fv.materials.material_system import MaterialSystem
 
 from .formulations import formulation_name, fractions_of
-from .plausibility import check_auxiliary, check_conductivity, check_thickness
+from .plausibility import (
+    IMPEDANCE_SLIPS,
+    check_auxiliary,
+    check_conductivity,
+    check_thickness,
+)
 
 __all__ = ["Measurements", "read_measurements", "read_tester_readings", "AUXILIARY_COLUMNS",
            "conductivity_from_impedance", "TABLE3"]
@@ -367,6 +372,7 @@ def read_tester_readings(path: str | Path, *,
             raise ValueError(f"{p.name} line {pts[0][0]}: {name!r} replicate {rep!r}: "
                              f"{exc}") from None
         check_conductivity(f"{p.name} lines {pts[0][0]}-{pts[-1][0]}", name, k,
-                           column="K = 1/slope of impedance_K_mm2_per_W")
+                           column="K = 1/slope of impedance_K_mm2_per_W",
+                           slips=IMPEDANCE_SLIPS, subject="impedance_K_mm2_per_W")
         values.setdefault(name, []).append(k)
     return _finish(p, values, str(p))

@@ -2,11 +2,12 @@
 
 A measured conductivity of a formulation can only lie below the Hashin-Shtrikman upper
 bound of its phases at perfect interfaces: an interface resistance only lowers the effective
-conductivity, so no resistance reaches above it (a value there is usually in mW/(m K)). A
-value below the matrix's own conductivity is reachable only with resistances that make the
-filler nearly insulating: it is warned about, not refused. A sample is 0.01 - 20 mm thick
-(thermal interface materials and their tester samples); a thickness outside that range is
-usually in um or m under a ``_mm`` column.
+conductivity, so no resistance reaches above it. A value below the matrix's own conductivity
+is reachable only with resistances that make the filler nearly insulating: it is warned
+about, not refused. A sample is 0.01 - 20 mm thick (thermal interface materials and their
+tester samples). A value outside its range is asked about a unit (mW/(m K) for a
+conductivity, um or m for a thickness under a ``_mm`` column) only where that unit makes it
+plausible (:func:`itr_fv.checks.unit_slip`); otherwise the message states the range.
 
 The phase conductivities are the paper's (:data:`itr_fv.materials.paper_data.PAPER_CONDUCTIVITY`),
 the ones the identification solves with.
@@ -15,15 +16,17 @@ the ones the identification solves with.
 from __future__ import annotations
 
 import warnings
+from collections.abc import Mapping
 
 from itr_fv.analytic import hashin_shtrikman_multiphase
+from itr_fv.checks import slip_hint
 from itr_fv.materials import paper_data
 
 from .formulations import fractions_of
 
 __all__ = ["ImplausibleMeasurementWarning", "conductivity_range", "check_conductivity",
            "check_thickness", "THICKNESS_RANGE_MM", "density_range", "powder_scale",
-           "check_auxiliary", "POWDER_SCALE_RANGE"]
+           "check_auxiliary", "POWDER_SCALE_RANGE", "CONDUCTIVITY_SLIPS", "IMPEDANCE_SLIPS"]
 
 class ImplausibleMeasurementWarning(UserWarning):
     """A measured value that physics allows but that is more likely a wrong unit."""
@@ -31,6 +34,13 @@ class ImplausibleMeasurementWarning(UserWarning):
 
 #: Plausible sample thickness, mm: a thermal interface material's tester sample.
 THICKNESS_RANGE_MM = (0.01, 20.0)
+#: Units a thickness under a ``_mm`` column may be in by mistake: the factor to mm.
+THICKNESS_SLIPS = {"um": 1e-3, "m": 1e3}
+#: Units a conductivity in W/(m K) may be in by mistake: the factor to W/(m K).
+CONDUCTIVITY_SLIPS = {"mW/(m K)": 1e-3}
+#: Units an impedance in K mm^2/W may be in by mistake, as the factor they put on the
+#: conductivity ``1/slope`` derived from it (K m^2/W: the slope 1e6 times too small).
+IMPEDANCE_SLIPS = {"K m^2/W": 1e-6, "K cm^2/W": 1e-2}
 
 
 def conductivity_range(formulation: str) -> tuple[float, float] | None:
@@ -49,8 +59,14 @@ def conductivity_range(formulation: str) -> tuple[float, float] | None:
 
 
 def check_conductivity(where: str, formulation: str, k_W_per_mK: float, *,
-                       column: str = "k_W_per_mK") -> None:
+                       column: str = "k_W_per_mK",
+                       slips: Mapping[str, float] = CONDUCTIVITY_SLIPS,
+                       subject: str = "it") -> None:
     """Refuse a conductivity above what any resistance allows; warn below the matrix's.
+
+    Either message asks about a unit only where one of ``slips`` makes the value plausible
+    (e.g. 1290 as mW/(m K)); otherwise it states the formulation's range (a 25 W/(m K) of a
+    60 % alumina is no unit slip: 25 mW/(m K) is below the matrix).
 
     Parameters
     ----------
@@ -62,6 +78,10 @@ def check_conductivity(where: str, formulation: str, k_W_per_mK: float, *,
         The measured (or reduced) conductivity, W/(m K).
     column : str
         The column it came from, named in the message.
+    slips : mapping of str to float
+        Units the value may be in by mistake (:func:`itr_fv.checks.unit_slip`).
+    subject : str
+        What may be in such a unit, named in the hint (``"it"``: the value).
 
     Raises
     ------
@@ -77,16 +97,20 @@ def check_conductivity(where: str, formulation: str, k_W_per_mK: float, *,
     if span is None:
         return
     k_matrix, k_upper = span
+    if k_matrix <= k_W_per_mK <= k_upper:
+        return
+    tail = slip_hint(k_W_per_mK, span, slips, "W/(m K)", subject=subject,
+                     result="that" if subject == "it" else "the conductivity") or (
+        f"a sample of {formulation} can conduct {k_matrix:g} - {k_upper:.3g} W/(m K)")
     if k_W_per_mK > k_upper:
         raise ValueError(f"{where}: {column} {k_W_per_mK:g} W/(m K) is above "
                          f"{k_upper:.3g} W/(m K), the most {formulation} can conduct at any "
                          "interface resistance (Hashin-Shtrikman bound at perfect interfaces); "
-                         "is it in mW/(m K)?")
-    if k_W_per_mK < k_matrix:
-        warnings.warn(f"{where}: {column} {k_W_per_mK:g} W/(m K) of {formulation} is below the "
-                      f"matrix's own {k_matrix:g} W/(m K): only resistances that make the "
-                      "filler nearly insulating reach it; check the unit",
-                      ImplausibleMeasurementWarning, stacklevel=3)
+                         f"{tail}")
+    warnings.warn(f"{where}: {column} {k_W_per_mK:g} W/(m K) of {formulation} is below the "
+                  f"matrix's own {k_matrix:g} W/(m K): only resistances that make the "
+                  f"filler nearly insulating reach it; {tail}",
+                  ImplausibleMeasurementWarning, stacklevel=3)
 
 
 def check_thickness(where: str, thickness_mm: float, *, column: str = "thickness_mm") -> None:
@@ -94,9 +118,9 @@ def check_thickness(where: str, thickness_mm: float, *, column: str = "thickness
     :func:`check_conductivity`)."""
     lo, hi = THICKNESS_RANGE_MM
     if not lo <= thickness_mm <= hi:
-        hint = "in um" if thickness_mm > hi else "in m"
+        hint = slip_hint(thickness_mm, THICKNESS_RANGE_MM, THICKNESS_SLIPS, "mm")
         raise ValueError(f"{where}: {column} {thickness_mm:g} mm is outside the {lo:g} - "
-                         f"{hi:g} mm of a thermal-interface sample; is it {hint}?")
+                         f"{hi:g} mm of a thermal-interface sample{'; ' + hint if hint else ''}")
 
 
 #: A powder of a size series may be this many times finer or coarser than the material
@@ -146,11 +170,11 @@ def check_auxiliary(where: str, formulation: str, column: str, value: float,
     if column == "density_g_per_cm3":
         rng = density_range(formulation, system)
         if rng is not None and not rng[0] <= value <= rng[1]:
-            hint = (f" (if it is in kg/m^3, it is {value / 1000:g} g/cm^3)" if value > 100
-                    else "")
+            hint = slip_hint(value, rng, {"kg/m^3": 1e-3}, "g/cm^3")
             raise ValueError(f"{where}: density_g_per_cm3 {value:g} is outside {rng[0]:g} - "
                              f"{rng[1]:g} g/cm^3, what a sample of {formulation} can have "
-                             f"(its matrix's to its densest filler's density){hint}")
+                             f"(its matrix's to its densest filler's density)"
+                             f"{'; ' + hint if hint else ''}")
     elif column == "filler_mass_fraction":
         if not 0 < value < 1:
             hint = (f" (if it is in per cent, it is {value / 100:g})" if 1 < value < 100

@@ -13,6 +13,7 @@ import math
 from collections.abc import Iterable
 from dataclasses import dataclass, replace
 
+from ..checks import slip_hint
 from .psd import LogNormalPSD
 
 __all__ = ["Filler", "MaterialSystem", "check_density", "DENSITY_RANGE_G_PER_CM3"]
@@ -64,10 +65,9 @@ def check_density(name: str, value: object) -> float:
             or not math.isfinite(value) or value <= 0:
         raise ValueError(f"{name}: expected a density > 0 in g/cm^3, got {value!r}")
     if not lo <= value <= hi:
-        hint = (f" (if {value:g} is in kg/m^3, it is {value / 1000:g} g/cm^3)"
-                if value > hi else "")
+        hint = slip_hint(value, (lo, hi), {"kg/m^3": 1e-3}, "g/cm^3")
         raise ValueError(f"{name}: {value:g} g/cm^3 is outside {lo:g} - {hi:g} g/cm^3, the "
-                         f"range of a solid phase{hint}")
+                         f"range of a solid phase{'; ' + hint if hint else ''}")
     return float(value)
 
 
