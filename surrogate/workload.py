@@ -191,14 +191,11 @@ class Workload:
         fields = sum(g.held_bytes()[1] for g in grids)
         return int(PROCESS_BASE_BYTES + task + min(problems, PROBLEM_CACHE_BYTES) + fields)
 
-    def _largest_fit(self, budget: float) -> int:
-        """The most voxels per edge the largest grid may have (its box kept, the others as
-        they are) for the peak to stay within ``budget`` bytes; 0 if not even 8 fit."""
-        g = self.largest
-        others = [h for h in self.grids if h is not g]
-
+    def _fit(self, g: Grid, budget: float) -> int:
+        """The most voxels per edge grid ``g`` may have, its box kept, for a run of it alone
+        to stay within ``budget`` bytes; 0 if not even 8 fit."""
         def peak(n: int) -> int:
-            return self._peak([*others, replace(g, voxel_um=g.box_um / n)])
+            return self._peak([replace(g, voxel_um=g.box_um / n)])
 
         lo, hi = 0, g.n
         while hi - lo > 1:                       # peak(lo) fits (or lo = 0), peak(hi) not
@@ -225,12 +222,16 @@ class Workload:
         if avail is None or need <= HEADROOM * avail:
             return None
         g = self.largest
-        fit = self._largest_fit(HEADROOM * avail)
+        budget = HEADROOM * avail
+        fit = self._fit(g, budget)
         where = "a Dask worker" if self.workers else "the run"
         hint = (f"at most ~{fit}^3 voxels fit: a voxel of at least {g.box_um / fit:.3g}"
                 f" um for the {g.box_um:g} um box, or a box of at most "
                 f"{fit * g.voxel_um:.3g} um at {g.voxel_um:g} um" if fit else
                 "no grid of 8^3 voxels or more fits")
+        also = [h for h in self.grids if h is not g and self._peak([h]) > budget]
+        if also:
+            hint += "; too large as well: " + ", ".join(f"{h.n}^3 ({h.label})" for h in also)
         return (f"memory: {where} on {g.n}^3 voxels ({g.label}: {g.box_um:g} um box at "
                 f"{g.voxel_um:g} um, solver {self.solver}) needs ~{_gb(need)} but "
                 f"{_gb(avail)} is available; {hint}")
