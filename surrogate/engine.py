@@ -558,8 +558,14 @@ class SolveEngine:
 
     Attributes
     ----------
-    solved, reused : int
-        Solves run by this engine, and requests answered from the store.
+    solved : int
+        Full solves this engine ran.
+    repeated : int
+        Requests answered by a solve of this engine (its stored row, or a duplicate in one
+        call): no new solve, but no work of an earlier run either.
+    earlier : int
+        Requests answered from the store by a row this engine did not write (an earlier
+        run's, or another process's).
     """
 
     def __init__(self, store: str | Path | SolveStore | None = None, *,
@@ -575,12 +581,18 @@ class SolveEngine:
         self.echo = echo
         self._client = self._cluster = None
         self._lock = threading.Lock()  # models may be built from several threads
-        self.solved = self.reused = 0
+        self.solved = self.repeated = self.earlier = 0
+        self._written: set[str] = set()   # keys of the rows this engine solved
         self._worker_builds = 0
         self._local_builds0 = geometry_builds()
         if scheduler:  # refuse an unreachable scheduler before any work
             self._client, self._cluster = open_client(None, scheduler, memory_per_worker=1,
                                                       echo=echo)
+
+    @property
+    def reused(self) -> int:
+        """Requests answered without a new solve: :attr:`repeated` plus :attr:`earlier`."""
+        return self.repeated + self.earlier
 
     @property
     def distributed(self) -> bool:
@@ -626,8 +638,7 @@ class SolveEngine:
             hit = self.store.get(req) if self.store is not None else None
             if hit is not None:
                 out[i] = hit
-                with self._lock:
-                    self.reused += 1
+                self._count_hit(req.key)
                 if tick is not None:
                     tick()
             else:
@@ -639,6 +650,8 @@ class SolveEngine:
                     self.store.put(first[key], res)
                 with self._lock:
                     self.solved += 1
+                    self.repeated += len(todo[key]) - 1   # the same request twice in one call
+                    self._written.add(key)
                     if self.distributed:
                         self._worker_builds += int(res.geometry_built)
                 for i in todo[key]:
@@ -646,6 +659,15 @@ class SolveEngine:
                     if tick is not None:
                         tick()
         return out  # type: ignore[return-value]
+
+    def _count_hit(self, key: str) -> None:
+        """Count a request the store answered: a repeat of this engine's own solve, or a
+        row of an earlier run."""
+        with self._lock:
+            if key in self._written:
+                self.repeated += 1
+            else:
+                self.earlier += 1
 
     def solve_one(self, request: SolveRequest) -> SolveResult:
         return self.solve([request])[0]
@@ -680,7 +702,20 @@ class SolveEngine:
         return geometry_builds() - self._local_builds0 + self._worker_builds
 
     def summary(self) -> str:
-        where = (f"scheduler {self.scheduler}" if self.scheduler else
-                 f"{self.workers} local workers" if self.workers else "this process")
-        return (f"{self.solved} full solves on {where}, {self.reused} reused from the store, "
-                f"{self.geometry_builds} geometry builds")
+        """One line: the full solves of this run and where they ran, the requests that
+        repeated one of them, those an earlier run's store answered, the geometry builds;
+        e.g. ``330 full solves in this process (32 requests repeated a solve of this run),
+        none from an earlier run, 24 geometry builds``."""
+        where = (f"on scheduler {self.scheduler}" if self.scheduler else
+                 f"on {self.workers} local workers" if self.workers else "in this process")
+        repeated = (f" ({_count(self.repeated, 'request')} repeated a solve of this run)"
+                    if self.repeated else "")
+        earlier = (f"{_count(self.earlier, 'request')} from the store of an earlier run"
+                   if self.earlier else "none from an earlier run")
+        return (f"{_count(self.solved, 'full solve')} {where}{repeated}, {earlier}, "
+                f"{_count(self.geometry_builds, 'geometry build')}")
+
+
+def _count(n: int, noun: str) -> str:
+    """``1 full solve``, ``2 full solves``."""
+    return f"{n} {noun}{'' if n == 1 else 's'}"

@@ -203,7 +203,8 @@ def test_itr_identify_on_workers_in_another_directory_keeps_every_solve_on_the_c
             "--scheduler", address]
     code, out, err = itr_main(capsys, *args)
     assert code == 0, err
-    solved = re.search(r"engine: (\d+) full solves on scheduler .*, (\d+) reused", out)
+    solved = re.search(r"engine: (\d+) full solves on scheduler .*, none from an earlier run",
+                       out)
     assert solved and int(solved.group(1)) > 0, out  # (a run reuses its own repeats)
     rows = sorted(Path("out", "solves").rglob("*.parquet"))
     assert len(rows) == int(solved.group(1))
@@ -213,7 +214,8 @@ def test_itr_identify_on_workers_in_another_directory_keeps_every_solve_on_the_c
     assert _files(worker_cwd) == []
     code, out, err = itr_main(capsys, *args)
     assert code == 0, err
-    again = re.search(r"engine: (\d+) full solves on scheduler .*, (\d+) reused", out)
+    again = re.search(r"engine: (\d+) full solves on scheduler \S+, (\d+) requests from the "
+                      r"store of an earlier run", out)
     assert again and int(again.group(1)) == 0 and int(again.group(2)) >= len(rows), out
     second = json.loads(Path("out", "identified.json").read_text())
     assert second["gap"]["parameters"]["R_Al2O3_silicone"]["best"] == r["best"]
@@ -233,7 +235,7 @@ def test_the_solve_engine_on_an_external_cluster_keeps_its_store_on_the_client(
         assert engine.solved == 2 and engine.geometry_builds == 1  # built once, on the worker
         monkeypatch.chdir(worker_cwd.parent)  # a change of directory moves nothing
         again = engine.solve(reqs)
-        assert engine.reused == 2
+        assert engine.reused == 2 and (engine.repeated, engine.earlier) == (2, 0)
     assert _files(worker_cwd) == []
     table = SolveStore(tmp_path / "store").table().to_pylist()
     assert len(table) == 2 and {r["purpose"] for r in table} == {"anchor"}

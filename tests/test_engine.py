@@ -86,6 +86,33 @@ def test_duplicate_requests_are_solved_once(rves):
     e = SolveEngine()
     out = e.solve([req, req])
     assert e.solved == 1 and np.array_equal(out[0].k_eff, out[1].k_eff)
+    assert (e.repeated, e.earlier, e.reused) == (1, 0, 1)
+
+
+def test_the_summary_tells_repeats_of_this_run_from_an_earlier_run(rves, tmp_path):
+    reqs = _requests(rves)
+    with SolveEngine(tmp_path / "store") as fresh:
+        fresh.solve(reqs)
+        assert fresh.summary().startswith("4 full solves in this process, none from an "
+                                          "earlier run, ")
+        fresh.solve(reqs[:3])   # the store answers, with rows this engine wrote
+        assert (fresh.solved, fresh.repeated, fresh.earlier) == (4, 3, 0)
+        assert fresh.summary() == (
+            "4 full solves in this process (3 requests repeated a solve of this run), none "
+            f"from an earlier run, {_builds(fresh.geometry_builds)}")
+    with SolveEngine(tmp_path / "store") as resumed:
+        resumed.solve(reqs[:1] + [SolveRequest.for_materials(
+            rves[0][1], MAT.with_parameters({"R_Al2O3_silicone": 3e-8}), 1e-9)])
+        resumed.solve(reqs[:1])   # an earlier run's row again: still not this run's solve
+        assert (resumed.solved, resumed.repeated, resumed.earlier, resumed.reused) == \
+            (1, 0, 2, 2)
+        assert resumed.summary() == (
+            "1 full solve in this process, 2 requests from the store of an earlier run, "
+            f"{_builds(resumed.geometry_builds)}")
+
+
+def _builds(n: int) -> str:
+    return f"{n} geometry build{'' if n == 1 else 's'}"
 
 
 def test_a_local_cluster_gives_the_serial_numbers(rves, tmp_path):

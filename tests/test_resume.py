@@ -27,15 +27,21 @@ TINY = ["--box-um", "12", "--voxel-um", "0.5", "--replicas", "2", "--no-progress
 REPRODUCE = ["reproduce", *TINY, "--no-leave-one-out"]
 DISCREPANCY = ["discrepancy", "--box-um", "12", "--voxel-um", "0.5", "--replicas", "2",
                "--effects", "matrix", "--no-progress"]
-ENGINE_LINE = re.compile(r"engine: (\d+) full solves on (.+?), (\d+) reused from the store, "
-                         r"(\d+) geometry builds")
+#: The engine's summary line: full solves, where, requests that repeated a solve of the same
+#: run (absent: none), requests answered by an earlier run's store ("none"), geometry builds.
+ENGINE_LINE = re.compile(
+    r"engine: (\d+) full solves? (?:in|on) (.+?)(?: \((\d+) requests? repeated a solve of this "
+    r"run\))?, (none|\d+ requests?) from (?:an|the store of an) earlier run, "
+    r"(\d+) geometry builds?")
 
 
 def _engine_counts(text: str) -> tuple[int, int, int]:
+    """(full solves, requests answered from an earlier run's store, geometry builds) of the
+    last engine line in ``text``."""
     m = ENGINE_LINE.findall(text)
     assert m, text[-2000:]
-    solved, _, reused, builds = m[-1]
-    return int(solved), int(reused), int(builds)
+    solved, _, _, earlier, builds = m[-1]
+    return int(solved), 0 if earlier == "none" else int(earlier.split()[0]), int(builds)
 
 
 def _strip(d):
@@ -103,9 +109,9 @@ def test_reproduce_killed_part_way_redoes_no_finished_solve(serial_reproduce, tm
     assert 0 < before < total
     capsys.readouterr()
     assert main([*REPRODUCE, "--out", str(out)]) == 0
-    solved, reused, _ = _engine_counts(capsys.readouterr().out)
+    solved, earlier, _ = _engine_counts(capsys.readouterr().out)
     # every solve that had finished is taken from the store, none is solved again
-    assert reused >= before and solved == total - before
+    assert earlier >= before and solved == total - before
     assert SolveStore(out / "solves").count() == total
     assert_close(_strip(json.loads((out / "identified.json").read_text())), ref)
 
@@ -113,10 +119,16 @@ def test_reproduce_killed_part_way_redoes_no_finished_solve(serial_reproduce, tm
 def test_reproduce_geometry_is_built_once_per_rve(serial_reproduce):
     out, _ = serial_reproduce
     manifest = json.loads((out / "manifest.json").read_text())
-    solved, _, builds = _engine_counts("engine: " + manifest["inputs"]["engine"])
+    line = "engine: " + manifest["inputs"]["engine"]
+    solved, earlier, builds = _engine_counts(line)
     # 12 formulations x 2 replicas, one contact model: one geometry per RVE (before the
     # engine, every full solve of a replica built its own)
     assert builds == 24 and solved > 3 * builds
+    # a fresh folder: what the store answered repeated solves of this same run
+    assert earlier == 0 and ", none from an earlier run, " in line
+    assert re.search(r"full solves in this process \(\d+ requests repeated a solve of this "
+                     r"run\), none", line), line
+    assert solved == SolveStore(out / "solves").count()
 
 
 @pytest.mark.slow
@@ -149,6 +161,7 @@ def test_workers_and_an_external_scheduler_give_the_serial_numbers(serial_reprod
         assert main([*REPRODUCE, "--out", str(out), "--scheduler", address]) == 0
         m = ENGINE_LINE.findall(capsys.readouterr().out)
         assert m and m[-1][1] == f"scheduler {address}" and int(m[-1][0]) == solved
+        assert m[-1][3] == "none"
         assert_close(_strip(json.loads((out / "identified.json").read_text())), ref)
     finally:
         for p in procs:
@@ -175,8 +188,10 @@ def test_discrepancy_killed_part_way_redoes_no_finished_solve(tmp_path, capsys):
     before = _run_and_kill(args, out, after_solves=total // 3)
     assert 0 < before < total
     assert main([*args, "--out", str(out)]) == 0
-    solved, reused, _ = _engine_counts(capsys.readouterr().out)
-    assert reused == before and solved == total - before
+    line = capsys.readouterr().out
+    solved, earlier, _ = _engine_counts(line)
+    assert earlier == before and solved == total - before
+    assert f", {before} requests from the store of an earlier run, " in line
     assert_close(json.loads((out / "discrepancy.json").read_text()),
                  json.loads((ref_out / "discrepancy.json").read_text()))
 
