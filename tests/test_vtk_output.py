@@ -1,5 +1,7 @@
 """VTK output read back with pyvista; off-screen PNG render."""
 
+import re
+
 import numpy as np
 import pytest
 import pyvista as pv
@@ -42,8 +44,35 @@ def test_vti_round_trip_holds_all_arrays(result, tmp_path):
     assert str(np.asarray(grid.field_data["solver"])[0]) == "itr_fv"
 
 
-def test_offscreen_png_render(result, tmp_path):
+def test_offscreen_png_render(result, tmp_path, monkeypatch):
+    import itr_fv.output.vtk as vtk_out
+
+    texts, axes = [], []
+    real = vtk_out.offscreen_plotter
+
+    def recording(**kwargs):   # the plotter, with its captions and axes recorded
+        pl = real(**kwargs)
+        add_text, show_bounds = pl.add_text, pl.show_bounds
+        pl.add_text = lambda text, **kw: texts.append(text) or add_text(text, **kw)
+        pl.show_bounds = lambda **kw: axes.append(kw) or show_bounds(**kw)
+        return pl
+
+    monkeypatch.setattr(vtk_out, "offscreen_plotter", recording)
     path = result.render_png(tmp_path / "field.png", load_case=1)
+    # the caption defines the load E of the picture (load case 1 of directions (0, 2): e3)
+    assert texts[0].startswith(
+        "heat flux magnitude / mean flux, load E = e3 (z)\n"
+        "E: the applied mean temperature gradient, 1 K/m, with T = -E·x + θ (T falls along z)\n"
+        "k_11 = ")
+    h_um = result.microstructure.voxel_m * 1e6
+    assert texts[1] == f"phases (box {16 * h_um:.3g} x {16 * h_um:.3g} x {16 * h_um:.3g} µm, " \
+                       f"voxel {h_um:.3g} µm)"
+    assert not any(re.search(r"\bum\b", t) for t in texts)
+    # both panels show the box's edges as axes, titled in µm (micrometres where VTK 9.6
+    # draws no 3-D text)
+    unit = "micrometres" if tuple(pv.vtk_version_info[:2]) == (9, 6) else "µm"
+    assert [(a["xtitle"], a["ytitle"], a["ztitle"]) for a in axes] == \
+        [(f"x ({unit})", f"y ({unit})", f"z ({unit})")] * 2
     assert path.stat().st_size > 10_000
     img = pv.read(path)
     pixels = np.asarray(img.point_data[img.point_data.keys()[0]])

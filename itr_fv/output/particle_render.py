@@ -7,26 +7,12 @@ from collections.abc import Mapping
 import numpy as np
 
 from ..rve.microstructure import Microstructure
-from .offscreen import DEFAULT_COLORS, PALETTE, offscreen_plotter
+from .offscreen import DEFAULT_COLORS, PALETTE, add_box_axes, offscreen_plotter, unicode_font
 
 __all__ = ["render_particles"]
 
 #: Digits of a phase name drawn as subscripts in the legend (Al2O3 -> Al₂O₃).
 _SUBSCRIPTS = str.maketrans("0123456789", "".join(chr(0x2080 + i) for i in range(10)))
-
-
-def _unicode_font(prop) -> None:
-    """Draw a VTK text property with matplotlib's DejaVu Sans (VTK's built-in fonts lack
-    the micro sign); left as it is where that font file is missing."""
-    from pathlib import Path
-
-    import matplotlib
-    import vtk
-
-    font = Path(matplotlib.get_data_path()) / "fonts" / "ttf" / "DejaVuSans.ttf"
-    if font.is_file():
-        prop.SetFontFamily(vtk.VTK_FONT_FILE)
-        prop.SetFontFile(str(font))
 
 
 def render_particles(ms: Microstructure, path: str, colors: Mapping[str, str] | None = None,
@@ -113,26 +99,14 @@ def render_particles(ms: Microstructure, path: str, colors: Mapping[str, str] | 
         pl.add_mesh(mesh, color=cmap[name], smooth_shading=True)
     if show_box:
         pl.add_mesh(pv.Box(bounds).outline(), color="black", line_width=2)
-        # the three box edges as axes with tick labels and titles, in micrometres
-        # FreeType text (3-D text actors) draws the micro sign; VTK 9.6 draws no 3-D text
-        # (vtk issue 19729), where the titles fall back to vector text in ASCII
-        text_3d = tuple(pv.vtk_version_info[:2]) != (9, 6)
-        unit = "µm" if text_3d else "micrometres"
-        axes = pl.show_bounds(bounds=bounds, xtitle=f"x ({unit})", ytitle=f"y ({unit})",
-                              ztitle=f"z ({unit})", n_xlabels=4, n_ylabels=4, n_zlabels=4,
-                              fmt="%.0f", font_size=axes_font_size, color="black",
-                              bold=False, location="outer", ticks="outside",
-                              use_3d_text=text_3d)
-        for i in range(3):
-            _unicode_font(axes.GetTitleTextProperty(i))
-            _unicode_font(axes.GetLabelTextProperty(i))
+        add_box_axes(pl, bounds, font_size=axes_font_size)
     # the legend: each phase's name in its colour, upper left (vtk's legend box scales a
     # lone entry's text past the window's edge)
     for i, name in enumerate(dict.fromkeys(mats.tolist())):
         text = pl.add_text(str(name).translate(_SUBSCRIPTS),
                            position=(12, window_size[1] - 34 * (i + 1)), font_size=14,
                            color=cmap[name])
-        _unicode_font(text.GetTextProperty())
+        unicode_font(text.GetTextProperty())
     pl.camera_position = "iso"
     if show_box:
         pl.camera.zoom(0.8)                    # room for the axis labels around the cube

@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 import numpy as np
 
 from ..io import atomic_path, output_file
-from .offscreen import DEFAULT_COLORS, PALETTE, offscreen_plotter
+from .offscreen import DEFAULT_COLORS, PALETTE, add_box_axes, offscreen_plotter, unicode_font
 
 if TYPE_CHECKING:  # pragma: no cover
     import pyvista
@@ -152,6 +152,45 @@ def _phase_colours(names: Sequence[str]) -> list[str]:
     return [DEFAULT_COLORS.get(n) or next(extra, "grey") for n in names]
 
 
+#: Axis names of the load directions 0, 1, 2.
+_AXES = "xyz"
+
+
+def load_caption(result: FieldResult, load_case: int) -> str:
+    """The flux panel's caption: the load E it shows (T = -E·x + θ, E = e_d of 1 K/m along
+    axis d: the temperature falls along that axis) and the solved diagonal of k_eff,
+    W/(m K)."""
+    d = result.directions[load_case]
+    # only the solved directions: the others' entries are not known (NaN)
+    ktxt = ", ".join(f"k_{j + 1}{j + 1} = {result.k_eff[j, j]:.4g}" for j in result.directions
+                     if np.isfinite(result.k_eff[j, j]))
+    return (f"heat flux magnitude / mean flux, load E = e{d + 1} ({_AXES[d]})\n"
+            f"E: the applied mean temperature gradient, 1 K/m, with T = -E·x + θ "
+            f"(T falls along {_AXES[d]})\n"
+            f"{ktxt} W/(m K)")
+
+
+def phase_caption(ms: Any) -> str:
+    """The phase panel's caption: the box and voxel edges of ``ms``, µm."""
+    h_um = ms.voxel_m * 1e6
+    box = " x ".join(f"{s * h_um:.3g}" for s in ms.shape)
+    return f"phases (box {box} µm, voxel {h_um:.3g} µm)"
+
+
+def _caption(pl: pyvista.Plotter, text: str) -> None:
+    """``text`` in the upper left of the active subplot, in a font with µm and θ."""
+    actor = pl.add_text(text, position="upper_left", font_size=11, color="black")
+    unicode_font(actor.GetTextProperty())
+
+
+def _box_axes(pl: pyvista.Plotter, grid: pyvista.ImageData) -> None:
+    """The box outline of the active subplot and its edges as axes in µm."""
+    pl.add_mesh(grid.outline(), color="black")
+    add_box_axes(pl, grid.bounds, font_size=16, n_labels=5, fmt="%.3g")
+    pl.camera_position = "iso"
+    pl.camera.zoom(0.8)                       # room for the axis labels around the cube
+
+
 def render_png(result: FieldResult, path: str | Path, load_case: int = 0,
                window_size: tuple[int, int] = (1600, 800)) -> Path:
     """Off-screen figure of one load case: heat-flux magnitude with the interfaces, and phases.
@@ -159,8 +198,10 @@ def render_png(result: FieldResult, path: str | Path, load_case: int = 0,
     Left: the heat-flux magnitude |q| / |<q>| (dimensionless, log colour scale) on three
     orthogonal mid-planes, with the particle surfaces traced in white on the planes, so
     the hot paths through particles and contacts and the resistive interfaces stand out.
-    Right: the same planes coloured by phase with a legend. The title gives the load
-    direction and k_eff (W/(m K)).
+    Right: the same planes coloured by phase with a legend. Both panels show the box's
+    edges as axes in µm; the captions define the load E (:func:`load_caption`: the mean
+    temperature gradient, 1 K/m along one axis), give k_eff (W/(m K)) and the box and
+    voxel (:func:`phase_caption`).
 
     Parameters
     ----------
@@ -177,6 +218,7 @@ def render_png(result: FieldResult, path: str | Path, load_case: int = 0,
     if not 0 <= load_case < len(result.directions):
         raise ValueError(f"load_case: expected 0..{len(result.directions) - 1}, got {load_case}")
     grid = to_image_data(result, load_cases=[load_case], vectors=False)
+    grid.spacing = (result.microstructure.voxel_m * 1e6,) * 3    # drawn in µm
     ms = result.microstructure
     d = result.directions[load_case]
     tag = f"e{d + 1}"
@@ -200,13 +242,8 @@ def render_png(result: FieldResult, path: str | Path, load_case: int = 0,
                 preference="cell", scalar_bar_args=dict(bar, title="flux / mean flux\n"))
     if edges.n_points:
         pl.add_mesh(edges, color="white", line_width=1.5)
-    pl.add_mesh(grid.outline(), color="black")
-    # only the solved directions: the others' entries are not known (NaN)
-    ktxt = ", ".join(f"k_{j + 1}{j + 1} = {result.k_eff[j, j]:.4g}" for j in result.directions
-                     if np.isfinite(result.k_eff[j, j]))
-    pl.add_text(f"heat flux for E along x{d + 1}\n{ktxt} W/(m K)",
-                position="upper_left", font_size=11, color="black")
-    pl.camera_position = "iso"
+    _caption(pl, load_caption(result, load_case))
+    _box_axes(pl, grid)
     pl.subplot(0, 1)
     names = list(ms.names)
     colours = _phase_colours(names)
@@ -219,12 +256,8 @@ def render_png(result: FieldResult, path: str | Path, load_case: int = 0,
                 scalar_bar_args=legend)
     if edges.n_points:
         pl.add_mesh(edges, color="black", line_width=1.0)
-    pl.add_mesh(grid.outline(), color="black")
-    h_um = ms.voxel_m * 1e6
-    box = " x ".join(f"{s * h_um:.3g}" for s in ms.shape)
-    pl.add_text(f"phases (box {box} um, voxel {h_um:.3g} um)", position="upper_left",
-                font_size=11, color="black")
-    pl.camera_position = "iso"
+    _caption(pl, phase_caption(ms))
+    _box_axes(pl, grid)
     with atomic_path(path) as tmp:
         pl.screenshot(str(tmp))
     pl.close()
