@@ -186,7 +186,7 @@ def _caption(pl: pyvista.Plotter, text: str) -> None:
 def _box_axes(pl: pyvista.Plotter, grid: pyvista.ImageData) -> None:
     """The box outline of the active subplot and its edges as axes in µm."""
     pl.add_mesh(grid.outline(), color="black")
-    add_box_axes(pl, grid.bounds, font_size=16, n_labels=5, fmt="%.3g")
+    add_box_axes(pl, grid.bounds, font_size=20, n_labels=5, fmt="%.3g")
     pl.camera_position = "iso"
     pl.camera.zoom(0.8)                       # room for the axis labels around the cube
 
