@@ -370,6 +370,23 @@ class SolveStore:
         """Finished solves in the store."""
         return len(self._rows())
 
+    def _fields(self) -> list[Path]:
+        folder = self.folder / "fields"
+        return sorted(folder.glob("*.npz")) if folder.is_dir() else []
+
+    def field_count(self) -> tuple[int, int]:
+        """(number, bytes) of the stored fields."""
+        files = self._fields()
+        return len(files), sum(f.stat().st_size for f in files)
+
+    def drop_fields(self) -> tuple[int, int]:
+        """Remove every stored field (the rows stay: a request that keeps fields is then
+        solved again, one that does not is still answered); returns (number, bytes)."""
+        n, size = self.field_count()
+        for f in self._fields():
+            f.unlink(missing_ok=True)
+        return n, size
+
     def table(self) -> pa.Table:
         """Every stored solve as one table (columns of all rows)."""
         files = self._rows()

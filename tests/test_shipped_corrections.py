@@ -246,6 +246,26 @@ def test_default_identification_applies_the_shipped_corrections_and_agrees_with_
     item = budget["formulations"]["Al2O3-60"]["items"]["correction uncertainty"]
     assert item["in_likelihood"] and 0 < item["value"] < 0.02
     assert "interpolation" in item["basis"]
+    # what ran, said once: every model took its shipped factor, no faithful solve ran, and
+    # the boxes named are the shipped table's (32 um for Al2O3), not the runtime fallback's
+    from itr_identify.reporting.level import level_lines, level_record
+    from itr_identify.reporting.report import identified_dict
+
+    rec = level_record(ident)
+    assert rec["level"] == "shipped" and rec["faithful_solves_this_run"] == 0
+    assert "runtime" not in rec and rec["shipped"]["boxes_um"]["Al2O3"] == 32.0
+    best = ident.posterior.best
+    for f, r in rec["models"].items():
+        m = ident.models[f]
+        c = m.shipped.factor({p: np.array([best[p]]) for p in m.parameters}, 1)[0][0]
+        assert r["source"] == "shipped" and r["factor"] == pytest.approx(c)
+    assert identified_dict(ident)["corrections"].keys() == ident.models.keys()
+    text = "\n".join(level_lines(ident))
+    assert "0 faithful full solves ran in this run" in text
+    assert "Al2O3 32 um" in text and "no solve of this run made them" in text
+    assert "repeated until" not in text and "24 um" not in text
+    settings_dict = settings.to_dict()["forward"]["faithful"]
+    assert "boxes_um" not in settings_dict and settings_dict["runtime_fallback"]["boxes_um"]
 
 
 def test_itr_corrections_build_and_show_on_a_tiny_plan(tmp_path, capsys):

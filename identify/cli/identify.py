@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 
 from .core import (
+    CLIError,
     engine_options,
     identification_arguments,
     identification_plan,
@@ -21,6 +22,12 @@ def _run(args: argparse.Namespace) -> int:
     from ..workflows.reproduce import run_identify
 
     settings = reproduce_settings(args)
+    if (args.measurements is None) == (not args.example):
+        raise CLIError("MEASUREMENTS: give a CSV file of your measurements, or --example for "
+                       "the paper's Table 3 shipped with the package", 2)
+    if args.example and args.readings:
+        raise CLIError("--readings: the shipped Table 3 (--example) holds conductivities, not "
+                       "tester readings", 2)
     meas = read_table(args.measurements,
                       read_tester_readings if args.readings else read_measurements)
     identification_plan(args, settings, meas.formulations, validation=False)
@@ -37,8 +44,12 @@ def add_parser(sub) -> None:
                          "(formulation,replicate,k_W_per_mK; or tester readings with "
                          "--readings); writes identified.json, report.md, posterior figures, "
                          "manifest.json.")
-    ide.add_argument("measurements", metavar="MEASUREMENTS",
+    ide.add_argument("measurements", metavar="MEASUREMENTS", nargs="?", default=None,
                      help="CSV file: formulation,replicate,k_W_per_mK")
+    ide.add_argument("--example", action="store_true",
+                     help="identify from the paper's Table 3 shipped with the package "
+                     "(itr_fv/data/measured_tc.csv; a CSV of the same columns is the "
+                     "template of your own table) instead of MEASUREMENTS")
     ide.add_argument("--readings", action="store_true", help="the file holds tester readings "
                      "(formulation,replicate,thickness_mm,impedance_K_mm2_per_W)")
     ide.add_argument("--out", default="itr-identify", help="output folder "

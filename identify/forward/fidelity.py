@@ -178,12 +178,16 @@ class FaithfulRVE:
         return (n, n, n)
 
     def to_dict(self) -> dict[str, Any]:
-        return {"name": self.name, "boxes_um": dict(self.boxes_um), "voxel_um": self.voxel_um,
+        """The level as settings; at a ``shipped`` level the faithful RVEs are those of a
+        formulation the shipped corrections do not hold (``runtime_fallback``), not the
+        shipped table's (what ran: :func:`itr_identify.reporting.level.level_record`)."""
+        rves = {"boxes_um": dict(self.boxes_um), "voxel_um": self.voxel_um,
                 "coarse_voxel_um": self.coarse_voxel_um, "packings": self.packings,
                 "seed": self.seed, "move_tolerance": self.move_tolerance,
-                "max_rounds": self.max_rounds, "shipped": self.shipped,
-                "bias_order": BIAS_ORDER,
-                "bias_order_se": BIAS_ORDER_SE}
+                "max_rounds": self.max_rounds}
+        head = {"name": self.name, "shipped": self.shipped}
+        body = {"runtime_fallback": rves} if self.shipped else rves
+        return {**head, **body, "bias_order": BIAS_ORDER, "bias_order_se": BIAS_ORDER_SE}
 
 
 @dataclass

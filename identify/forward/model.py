@@ -386,15 +386,17 @@ class ForwardModel:
         c = self._factor_of(columns, k.size)
         return k * c, err * c
 
-    def first_replica_k(self, values: Mapping[str, float]) -> float:
-        """k_iso of the first replica's reduced basis at ``values`` (m^2 K/W), W/(m K):
-        without the replica factor and the faithful correction, the number a full solve of
-        that replica checks."""
+    def first_replica_k(self, values: Mapping[str, float]) -> tuple[float, float, float]:
+        """k_iso of the first replica's reduced basis at ``values`` (m^2 K/W) and its
+        certified lower and upper bounds, W/(m K): raw (without the replica factor and the
+        fidelity level's factor), the numbers a full solve of that replica checks."""
         if self.rb is None:
             raise ValueError("values: this model holds its parameters fixed; it has no "
                              "reduced basis")
         cols = self.clipped({p: np.array([values[p]]) for p in self.parameters})
-        return float(np.trace(self.rb.predict(cols)[0]) / 3.0)
+        lower, upper = self.rb.bounds_of(cols)
+        return (float(np.trace(self.rb.predict(cols)[0]) / 3.0), float(lower[0].mean()),
+                float(upper[0].mean()))
 
     def _predict_raw(self, columns: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
         """:meth:`predict` without the faithful correction."""
@@ -429,6 +431,26 @@ class ForwardModel:
                 slope = (last.factor - prev.factor) / (xb - xa)
                 return last.factor + slope * (x - xb)
         return np.full(n, last.factor)
+
+    def level_at(self, values: Mapping[str, float]) -> dict[str, object]:
+        """How this model's level is set at ``values`` (flat names, m^2 K/W): ``source``
+        (``"runtime"``: corrected by faithful solves of this run; ``"shipped"``: the
+        corrections shipped with the package; ``"none"``), the ``factor`` on the cheap
+        RVE's k and its ``relative_sd`` there, and where it comes from (the shipped
+        system, or the runtime correction's box, voxels, packing seeds and rounds)."""
+        cols = {p: np.array([float(values[p])]) for p in self.parameters}
+        factor = float(self._factor_of(cols, 1)[0])
+        if self.correction is not None:
+            c = self.correction
+            return {"source": "runtime", "factor": factor, "relative_sd": c.relative_sd,
+                    "box_um": c.box_um, "voxels_um": [c.coarse_voxel_um, c.voxel_um],
+                    "seeds": list(c.seeds), "rounds": len(self.corrections)}
+        if self.shipped is not None:
+            u = float(self.shipped.factor(cols, 1)[1][0])
+            return {"source": "shipped", "factor": factor, "relative_sd": u,
+                    "system": self.shipped.system}
+        return {"source": "none", "factor": 1.0, "relative_sd": 0.0,
+                **({"why": self.shipped_note} if self.shipped_note else {})}
 
     @property
     def fidelity_factor(self) -> float:

@@ -32,21 +32,28 @@ def validate(models: Mapping[str, ForwardModel], values: Mapping[str, float],
     """Full-solver predictions of every formulation at ``values`` (flat names, m^2 K/W).
 
     Returns one row per formulation: measured mean and standard error, predicted mean and
-    standard deviation over replicas x directions (W/(m K)), relative error (%), and the
+    standard deviation over replicas x directions at the model's fidelity level
+    (``predicted``: the cheap replicas' full solves times the level's factor at ``values``,
+    :meth:`~itr_identify.forward.model.ForwardModel.level_at`) and raw (``predicted_raw``:
+    the cheap RVEs' own), W/(m K), the level and its factor, relative error (%), and the
     paper's Table 6 prediction and error where the formulation is one of the paper's.
     """
     table6 = paper_data.paper_validation()
     rows = []
     for name, model in models.items():
-        # the cheap replicas' full solves, at the faithful level where the model is corrected
-        k = model.solve_replicas({p: values[p] for p in model.parameters},
-                                 tick=tick) * model.fidelity_factor
+        own = {p: values[p] for p in model.parameters}
+        raw = model.solve_replicas(own, tick=tick)      # the cheap replicas' full solves
+        level = model.level_at(own)
+        k = raw * level["factor"]                      # at the model's fidelity level
         pred = float(k.mean())
         meas = measurements.mean(name)
         row = {"formulation": name, "measured": meas,
                "measured_se": measurements.standard_error(name),
                "predicted": pred, "predicted_sd": float(k.std(ddof=1)),
                "replica_k_iso": k.mean(axis=1).tolist(),
+               "predicted_raw": float(raw.mean()), "predicted_raw_sd": float(raw.std(ddof=1)),
+               "replica_k_iso_raw": raw.mean(axis=1).tolist(),
+               "level": level["source"], "level_factor": level["factor"],
                "error_pct": 100 * (pred / meas - 1)}
         if name in table6:
             row["paper_predicted"] = table6[name][1]

@@ -41,6 +41,7 @@ from ..forward.fidelity import fidelity_name
 from ..inference.calibrate import EDGE_FACTOR, UNDETERMINED_DECADES
 from ..inference.pipeline import Identification
 from .error_budget import error_budget
+from .level import level_record
 
 __all__ = ["parameter_flag", "prior_ends", "choose_parametrisation", "parametrisation_choice",
            "chi_square_per_dof", "fidelity_note", "headline", "headline_lines",
@@ -222,14 +223,16 @@ def _caveat(budget_entry: dict) -> dict:
 
 
 def fidelity_note(settings, parameters: Mapping[str, object] | None = None,
-                  marked: bool = False) -> str:
+                  marked: bool = False, ran: Mapping[str, object] | None = None) -> str:
     """Once, at the top of the headline: what the values of this fidelity are good for. At
     ``quick`` (no faithful correction) they are indicative, with the bias measured against
     ``standard`` on the shipped data (:data:`QUICK_TO_STANDARD`, for the gap parameters of
     ``parameters``) and what to run for values to quote; at a corrected level, what it still
     leaves out. ``parameters``: per parametrisation its parameter names (default both
     parametrisations, every parameter); ``marked``: whether some values carry a caveat
-    (marked ``*``)."""
+    (marked ``*``); ``ran``: the gap parametrisation's
+    :func:`~itr_identify.reporting.level.level_record` (what corrected its models), where
+    there is one."""
     s = settings
     name = fidelity_name(s.faithful)
     if parameters is None:
@@ -259,13 +262,24 @@ def fidelity_note(settings, parameters: Mapping[str, object] | None = None,
         prov = ShippedCorrections.load().provenance
         boxes = ", ".join(f"{f} {b:g} um" for f, b in prov["boxes_um"].items())
         voxels = " and ".join(f"{v:g}" for v in prov["voxels_um"])
+        models = dict(ran["models"]) if ran else {}
+        runtime = [f for f, r in models.items() if r["source"] == "runtime"]
+        if not models:
+            rest = ("; a formulation they do not hold is corrected at runtime on "
+                    f"{', '.join(sorted({f'{b:g} um' for _, b in s.faithful.boxes_um}))} "
+                    "boxes.")
+        elif runtime:
+            rest = (f"; {', '.join(runtime)}, which they do not hold, were corrected in this "
+                    f"run on {', '.join(sorted({f'{b:g} um' for _, b in s.faithful.boxes_um}))}"
+                    f" boxes ({ran['faithful_solves_this_run']} faithful solves).")
+        else:
+            rest = ("; every gap model took its shipped factor: no faithful solve ran in "
+                    "this run.")
         return (f"Fidelity `{name}` (the default): the gap parametrisation's level is "
                 f"corrected by the corrections shipped with the package (converged boxes: "
                 f"{boxes}; voxel bias extrapolated from {voxels} um; {prov['packings']} "
                 f"packings; {prov['date']}, `itr corrections show`), their uncertainty in "
-                "the intervals; a formulation they do not hold is corrected at runtime on "
-                f"{', '.join(sorted({f'{b:g} um' for _, b in s.faithful.boxes_um}))} boxes."
-                + star + area)
+                "the intervals" + rest + star + area)
     boxes = ", ".join(f"{f} {b:g} um" for f, b in s.faithful.boxes_um)
     return (f"Fidelity `{name}`: the gap parametrisation's level is corrected on faithful "
             f"RVEs (boxes {boxes}; voxel bias removed by Richardson over "
@@ -293,7 +307,8 @@ def headline(idents: Mapping[str, Identification]) -> dict:
     return {"quote": choice["quote"], "why": choice["why"], "supported": choice["supported"],
             "fidelity": fidelity,
             "fidelity_note": fidelity_note(
-                s, {p: tuple(i.posterior.names) for p, i in idents.items()}, marked),
+                s, {p: tuple(i.posterior.names) for p, i in idents.items()}, marked,
+                level_record(idents["gap"]) if "gap" in idents else None),
             "holds_at": f"{s.box_um:g} um box, {s.voxel_um:g} um voxels"
                         + ("" if s.faithful is None else
                            ", corrected to converged boxes by the shipped corrections"

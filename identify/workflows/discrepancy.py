@@ -19,7 +19,7 @@ from ..discrepancy.tables import build_tables, n_solves
 from ..inference.formulations import fractions_of
 from ..inference.measurements import Measurements
 from ..reporting.discrepancy_report import gap_figure, report_lines
-from .reproduce import open_engine
+from .reproduce import drop_fields, open_engine
 
 __all__ = ["run_discrepancy"]
 
@@ -27,13 +27,14 @@ __all__ = ["run_discrepancy"]
 def run_discrepancy(meas: Measurements, settings: DiscrepancySettings, out: Path, *,
                     effects: list | None = None, progress: bool = True,
                     echo: Callable[[str], None] = print, workers: int | None = None,
-                    scheduler: str | None = None, store: str | Path | None = None
-                    ) -> Discrepancy:
+                    scheduler: str | None = None, store: str | Path | None = None,
+                    keep_fields: bool = False) -> Discrepancy:
     """The workflow on ``meas`` (``effects``: the candidates, default the whole library)
     with its report in ``out``: discrepancy.md, .json, .png, manifest.json. The forward
     tables' full solves run on the solve engine (in this process, on ``workers`` local
     processes or on the Dask ``scheduler``) and are kept in ``out/solves`` or ``store``: a
-    re-run (another table, or after a kill) on the same store redoes none that finished."""
+    re-run (another table, or after a kill) on the same store redoes none that finished;
+    ``keep_fields`` as :func:`~itr_identify.workflows.reproduce.drop_fields`."""
     from tqdm.auto import tqdm
 
     comps = {f: fractions_of(f) for f in meas.formulations}
@@ -50,6 +51,7 @@ def run_discrepancy(meas: Measurements, settings: DiscrepancySettings, out: Path
                               tick=lambda: bar.update(), engine=engine)
         correct = corrector(engine) if settings.correct_at_best else None
         d = find_discrepancy(meas, settings=settings, tables=tables, correct=correct)
+        drop_fields(engine, keep_fields, echo)
     echo(f"engine: {engine.summary()}")
     files = [write_text(out / "discrepancy.json", json.dumps(d.to_dict(), indent=2) + "\n")]
     files.append(gap_figure(d, out / "discrepancy.png"))

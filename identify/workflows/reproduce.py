@@ -14,6 +14,7 @@ validation solves; writes ``identified.json``, ``report.md`` and a posterior fig
 from __future__ import annotations
 
 import json
+import math
 import time
 import warnings
 from collections.abc import Callable, Sequence
@@ -31,8 +32,10 @@ from ..inference.pipeline import Identification, identify
 from ..inference.validate import leave_one_out, validate
 from ..reporting import figures, report
 from ..reporting.headline import headline, headline_lines, headline_markdown
+from ..reporting.level import runs_record
 
-__all__ = ["ReproduceSettings", "run_reproduce", "run_identify", "write_solves"]
+__all__ = ["ReproduceSettings", "run_reproduce", "run_identify", "write_solves",
+           "drop_fields"]
 
 
 #: The fidelity level of ``itr reproduce`` and ``itr identify`` by default: ``shipped`` (the
@@ -80,13 +83,31 @@ def _bar(total: int, desc: str, progress: bool, unit: str = "solve"):
 
 def write_solves(idents: Sequence[Identification], path: Path) -> Path:
     """Every full solve of the run as one Parquet table (atomic): the solve store's rows
-    (:func:`itr_surrogate.engine.solve_row`: key, RVE, parameters, tensor, iterations,
-    labels) with the parametrisation that asked for them."""
+    (:func:`itr_surrogate.engine.solve_row`: key, RVE, parameters, the raw tensor of that
+    RVE, iterations, labels) with the parametrisation that asked for them and, for the
+    solves of the cheap RVEs, their value at the fidelity level: ``level`` (``runtime``,
+    ``shipped`` or ``none``: :meth:`~itr_identify.forward.model.ForwardModel.level_at` at
+    the row's parameters), ``level_factor`` and ``k_iso_at_level`` (W/(m K)). A faithful
+    RVE's own solve (``level`` ``faithful RVE``) has no factor: it is a level itself."""
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    rows = [{"parametrisation": ident.parametrisation, **row}
-            for ident in idents for m in ident.models.values() for row in m.solves]
+    rows = []
+    for ident in idents:
+        cheap = (ident.settings.box_um, ident.settings.voxel_um)
+        for m in ident.models.values():
+            for row in m.solves:
+                extra: dict[str, object] = {"parametrisation": ident.parametrisation}
+                if not all(math.isclose(row[k], v, rel_tol=1e-9)
+                           for k, v in zip(("box_um", "voxel_um"), cheap)):
+                    extra.update(level="faithful RVE", level_factor=math.nan,
+                                 k_iso_at_level=math.nan)
+                else:
+                    values = {p: row.get(p, m.fixed.get(p)) for p in m.parameters}
+                    level = m.level_at(values)
+                    extra.update(level=level["source"], level_factor=level["factor"],
+                                 k_iso_at_level=row["k_iso"] * level["factor"])
+                rows.append({**extra, **row})
     names = sorted({k for r in rows for k in r})
     table = pa.table({k: [r.get(k) for r in rows] for k in names})
     with atomic_path(path) as tmp:
@@ -95,23 +116,30 @@ def write_solves(idents: Sequence[Identification], path: Path) -> Path:
 
 
 def _temperature_field(ident: Identification, formulation: str, out: Path) -> list[Path]:
-    """Full solve with fields of the first replica at the best values: .vti and a render
-    (on this process's cached problem of that RVE: its geometry is not built again)."""
+    """Full solve with fields of the first replica at the best values (three load cases:
+    the .vti holds the whole tensor), its .vti, a render and a temperature figure, whose k
+    is said raw and at the fidelity level (on this process's cached problem of that RVE: its
+    geometry is not built again)."""
     from itr_fv.solvers.choice import solver_backend
     from itr_fv.solvers.driver import homogenize
     from itr_surrogate.engine import RVEData, cached_problem
 
     m = ident.models[formulation]
-    mat = m.materials({p: ident.posterior.best[p] for p in m.parameters})
+    best = {p: ident.posterior.best[p] for p in m.parameters}
+    mat = m.materials(best)
     problem = cached_problem(RVEData.of(m.microstructures[0]), mat.contact)[0]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         res = homogenize(problem, mat, backend=solver_backend(ident.settings.solver),
-                         tol=ident.settings.solver_tol, directions=(0,))
+                         tol=ident.settings.solver_tol)
+    level = m.level_at(best)
+    name = fidelity_name(ident.settings.faithful)
     stem = f"temperature_{formulation}_{ident.parametrisation}"
     vti = res.to_vtk(out / f"{stem}.vti", load_cases=[0], vectors=False)
-    flux = res.render_png(out / f"flux_{formulation}_{ident.parametrisation}.png")
-    temp = figures.temperature_figure(res, out / f"{stem}.png")
+    flux = res.render_png(out / f"flux_{formulation}_{ident.parametrisation}.png",
+                          k_text="k_11 = " + figures.level_caption(float(res.k_eff[0, 0]),
+                                                                   level, name))
+    temp = figures.temperature_figure(res, out / f"{stem}.png", level=level, level_name=name)
     return [Path(vti), Path(flux), Path(temp)]
 
 
@@ -145,21 +173,43 @@ def _identify_all(meas: Measurements, settings: ReproduceSettings, progress: boo
 
 def run_reproduce(settings: ReproduceSettings, out: Path, *, progress: bool = True,
                   echo: Callable[[str], None] = print, workers: int | None = None,
-                  scheduler: str | None = None, store: str | Path | None = None
-                  ) -> list[Path]:
+                  scheduler: str | None = None, store: str | Path | None = None,
+                  keep_fields: bool = False) -> list[Path]:
     """The whole pipeline on the shipped data; returns the files written (manifest last).
 
     Every full solve runs on the solve engine (:func:`open_engine`: in this process, on
-    ``workers`` local processes or on the Dask ``scheduler``) and is kept in ``out/solves``.
+    ``workers`` local processes or on the Dask ``scheduler``) and is kept in ``out/solves``
+    (or ``store``); the reduced bases' snapshot fields stay there only while the run lasts,
+    unless ``keep_fields`` (:func:`drop_fields`).
     """
     begin_run(out, "reproduce", folders=("solves",))
     with open_engine(out, workers=workers, scheduler=scheduler, store=store,
                      echo=echo) as engine:
-        return _reproduce(settings, Path(out), progress, echo, engine)
+        files = _reproduce(settings, Path(out), progress, echo, engine, keep_fields)
+    return files
+
+
+def drop_fields(engine: SolveEngine, keep_fields: bool,
+                echo: Callable[[str], None] = print) -> str:
+    """At the end of a finished run: remove the snapshot fields from the engine's store
+    unless ``keep_fields`` (a later run on the same store then solves those snapshots
+    again); returns what the store holds now, for the report and the last line."""
+    store = engine.store
+    if store is None:
+        return "no store"
+    if keep_fields:
+        n, size = store.field_count()
+        return f"{n} snapshot fields kept ({size / 1e6:.0f} MB, --keep-fields)"
+    n, size = store.drop_fields()
+    if n:
+        echo(f"store: {n} snapshot fields removed ({size / 1e6:.0f} MB; --keep-fields keeps "
+             "them)")
+    return "snapshot fields removed at the end of the run (--keep-fields keeps them)"
 
 
 def _reproduce(settings: ReproduceSettings, out: Path, progress: bool,
-               echo: Callable[[str], None], engine: SolveEngine) -> list[Path]:
+               echo: Callable[[str], None], engine: SolveEngine,
+               keep_fields: bool) -> list[Path]:
     t0 = time.perf_counter()
     meas = read_measurements()
     idents = _identify_all(meas, settings, progress, echo, engine)
@@ -186,12 +236,14 @@ def _reproduce(settings: ReproduceSettings, out: Path, progress: bool,
     t_lofo = time.perf_counter() - t
     echo("figures and fields")
     files, psd_fits = _figures(idents, validation, out)
+    fields = drop_fields(engine, keep_fields, echo)
     files.append(write_solves(list(idents.values()), out / "full_solves.parquet"))
     head = headline(idents)
     data = {"headline": head}
     data.update({p: {**report.identified_dict(i), "validation": validation[p],
                      "leave_one_out": lofo.get(p, [])} for p, i in idents.items()})
     data["selection"] = report.selection(idents)
+    data["surrogate_check"] = figures.surrogate_check(validation, idents)
     data["psd_fit"] = psd_fits
     files.append(write_text(out / "identified.json", json.dumps(data, indent=2) + "\n"))
     wall = time.perf_counter() - t0
@@ -199,9 +251,11 @@ def _reproduce(settings: ReproduceSettings, out: Path, progress: bool,
               "validation full solves": t_val, "leave-one-formulation-out": t_lofo,
               "total (before the report)": wall}
     files.append(write_text(out / "report.md", _reproduce_markdown(
-        head, idents, meas, validation, lofo, psd_fits, timing, settings)))
-    files.append(write_manifest(out, files, {**settings.to_dict(), "wall_s": round(wall, 1),
-                                             "engine": engine.summary()}, job="reproduce"))
+        head, idents, meas, validation, lofo, psd_fits, timing, settings,
+        data["surrogate_check"])))
+    files.append(write_manifest(out, files, {**settings.to_dict(), "fidelity_ran": runs_record(
+        idents), "wall_s": round(wall, 1), "engine": engine.summary(), "store_fields": fields},
+        job="reproduce"))
     echo(f"engine: {engine.summary()}")
     for line in headline_lines(head):
         echo(line)
@@ -228,7 +282,7 @@ def _figures(idents: dict[str, Identification], validation: dict, out: Path
 
 
 def _reproduce_markdown(head, idents, meas, validation, lofo, psd_fits, timing,
-                        settings) -> str:
+                        settings, surrogate) -> str:
     from itr_fv.materials import paper_data
 
     table1 = paper_data.psd_lognormal()
@@ -267,12 +321,15 @@ def _reproduce_markdown(head, idents, meas, validation, lofo, psd_fits, timing,
     lines += report.identifiability_lines(idents)
     lines += ["", "## Table 6: validation with the full solver", ""]
     lines += report.table6_lines(validation)
+    lines += ["", "Fig. 6 (`fig6_parity.png`), left: the surrogate against the full solver, "
+              "both raw (the cheap RVE's own k):", ""] + report.surrogate_lines(surrogate)
     if lofo:
         lines += ["", "## Leave one formulation out", ""]
         lines += report.lofo_lines(lofo)
     lines += ["", "## Files", "",
               "`identified.json` (every value above), `full_solves.parquet` (every full solve "
-              "of the run), `fig2_psd.png`, `fig4_rves.png`, `fig6_parity.png`, "
+              "of the run: the raw tensor of its RVE, and for the cheap RVEs `level`, "
+              "`level_factor` and `k_iso_at_level`), `fig2_psd.png`, `fig4_rves.png`, `fig6_parity.png`, "
               "`fig8_screening.png`, `posterior_*.png`, `temperature_*.vti/.png` (temperature "
               "on a mid-plane), `flux_*.png` (pyvista render of the heat flux), "
               "`manifest.json` (sizes and SHA-256, settings, versions)."]
@@ -282,15 +339,17 @@ def _reproduce_markdown(head, idents, meas, validation, lofo, psd_fits, timing,
 def run_identify(meas: Measurements, settings: ReproduceSettings, out: Path, *,
                  progress: bool = True, echo: Callable[[str], None] = print,
                  workers: int | None = None, scheduler: str | None = None,
-                 store: str | Path | None = None) -> list[Path]:
+                 store: str | Path | None = None, keep_fields: bool = False) -> list[Path]:
     """Identification of a user's measurement table; returns the files written. Full
-    solves as in :func:`run_reproduce` (kept in ``out/solves``)."""
+    solves as in :func:`run_reproduce` (kept in ``out/solves``; the snapshot fields only
+    with ``keep_fields``)."""
     out = Path(out)
     begin_run(out, "identify", folders=("solves",))
     with open_engine(out, workers=workers, scheduler=scheduler, store=store,
                      echo=echo) as engine:
         t0 = time.perf_counter()
         idents = _identify_all(meas, settings, progress, echo, engine)
+        drop_fields(engine, keep_fields, echo)
         echo(f"engine: {engine.summary()}")
     return _identify_report(meas, settings, out, idents, t0, echo)
 
@@ -316,7 +375,9 @@ def _identify_report(meas: Measurements, settings: ReproduceSettings, out: Path,
     lines += ["", "## Identifiability", ""] + report.identifiability_lines(idents)
     files.append(write_text(out / "report.md", "\n".join(lines) + "\n"))
     files.append(write_manifest(out, files, {"measurements": meas.source,
-                                             **settings.to_dict()}, job="identify"))
+                                             **settings.to_dict(),
+                                             "fidelity_ran": runs_record(idents)},
+                                job="identify"))
     for line in headline_lines(head):
         echo(line)
     echo(f"identify: done in {time.perf_counter() - t0:.0f} s; wrote {_written(out, files)}")

@@ -156,18 +156,19 @@ def _phase_colours(names: Sequence[str]) -> list[str]:
 _AXES = "xyz"
 
 
-def load_caption(result: FieldResult, load_case: int) -> str:
+def load_caption(result: FieldResult, load_case: int, k_text: str | None = None) -> str:
     """The flux panel's caption: the load E it shows (T = -E·x + θ, E = e_d of 1 K/m along
     axis d: the temperature falls along that axis) and the solved diagonal of k_eff,
-    W/(m K)."""
+    W/(m K), or ``k_text`` in its place (a caller that says what the k is, e.g. raw and
+    at a fidelity level)."""
     d = result.directions[load_case]
     # only the solved directions: the others' entries are not known (NaN)
     ktxt = ", ".join(f"k_{j + 1}{j + 1} = {result.k_eff[j, j]:.4g}" for j in result.directions
-                     if np.isfinite(result.k_eff[j, j]))
+                     if np.isfinite(result.k_eff[j, j])) + " W/(m K)"
     return (f"heat flux magnitude / mean flux, load E = e{d + 1} ({_AXES[d]})\n"
             f"E: the applied mean temperature gradient, 1 K/m, with T = -E·x + θ "
             f"(T falls along {_AXES[d]})\n"
-            f"{ktxt} W/(m K)")
+            f"{ktxt if k_text is None else k_text}")
 
 
 def phase_caption(ms: Any) -> str:
@@ -192,7 +193,8 @@ def _box_axes(pl: pyvista.Plotter, grid: pyvista.ImageData) -> None:
 
 
 def render_png(result: FieldResult, path: str | Path, load_case: int = 0,
-               window_size: tuple[int, int] = (1600, 800)) -> Path:
+               window_size: tuple[int, int] = (1600, 800), *,
+               k_text: str | None = None) -> Path:
     """Off-screen figure of one load case: heat-flux magnitude with the interfaces, and phases.
 
     Left: the heat-flux magnitude |q| / |<q>| (dimensionless, log colour scale) on three
@@ -213,6 +215,8 @@ def render_png(result: FieldResult, path: str | Path, load_case: int = 0,
         Index into ``result.directions``.
     window_size : (int, int)
         Pixels.
+    k_text : str, optional
+        The caption's k line instead of the solved diagonal (:func:`load_caption`).
     """
     path = output_file(path, ".png")
     if not 0 <= load_case < len(result.directions):
@@ -242,7 +246,7 @@ def render_png(result: FieldResult, path: str | Path, load_case: int = 0,
                 preference="cell", scalar_bar_args=dict(bar, title="flux / mean flux\n"))
     if edges.n_points:
         pl.add_mesh(edges, color="white", line_width=1.5)
-    _caption(pl, load_caption(result, load_case))
+    _caption(pl, load_caption(result, load_case, k_text))
     _box_axes(pl, grid)
     pl.subplot(0, 1)
     names = list(ms.names)

@@ -114,13 +114,15 @@ class HomogenizationResult:
         return write_vti(self, path, load_cases=load_cases, vectors=vectors,
                          precision=precision)
 
-    def render_png(self, path: str | Path, load_case: int = 0) -> Path:
-        """Off-screen PNG: heat-flux magnitude and interfaces on mid-planes, phases, k_eff.
+    def render_png(self, path: str | Path, load_case: int = 0, *,
+                   k_text: str | None = None) -> Path:
+        """Off-screen PNG: heat-flux magnitude and interfaces on mid-planes, phases, k_eff
+        (or ``k_text`` in its place).
 
         See :func:`itr_fv.output.vtk.render_png`.
         """
         from ..output.vtk import render_png
-        return render_png(self, path, load_case=load_case)
+        return render_png(self, path, load_case=load_case, k_text=k_text)
 
     def summary(self) -> str:
         """Human-readable summary of tensor, iterations and residuals."""

@@ -1,0 +1,107 @@
+"""The fidelity level that actually ran, in one record: identified.json, the manifest and the
+report say it from here, so that none of them says a solve ran that did not.
+
+Per model (:meth:`~itr_identify.forward.model.ForwardModel.level_at` at the best values):
+where its level came from (``shipped``: the corrections shipped with the package;
+``runtime``: faithful solves of this run; ``none``), the factor on the cheap RVE's k and its
+uncertainty. Then, only where a model used it, the shipped table's provenance (its boxes,
+voxels, packings, date and commit) and the runtime correction's RVEs, rounds and
+convergence.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+from ..forward.fidelity import fidelity_name
+from ..inference.pipeline import Identification
+
+__all__ = ["level_record", "level_lines", "runs_record"]
+
+#: Provenance entries of the shipped table that say what its corrections are.
+_SHIPPED_KEYS = ("plan", "date", "commit", "boxes_um", "voxels_per_system_um", "packings",
+                 "seeds", "tol", "solver")
+
+
+def _faithful_solves(ident: Identification) -> int:
+    return sum(1 for m in ident.models.values() for r in m.solves
+               if str(r.get("purpose", "")).startswith("faithful"))
+
+
+def level_record(ident: Identification) -> dict:
+    """What set the level of each model of ``ident`` at its best values (module notes)."""
+    models = {f: m.level_at({p: ident.posterior.best[p] for p in m.parameters})
+              for f, m in ident.models.items()}
+    sources = {r["source"] for r in models.values()}
+    rec: dict = {"level": fidelity_name(ident.settings.faithful),
+                 "parametrisation": ident.parametrisation,
+                 "faithful_solves_this_run": _faithful_solves(ident), "models": models}
+    if "shipped" in sources:
+        from ..forward.shipped import ShippedCorrections
+
+        prov = ShippedCorrections.load().provenance
+        rec["shipped"] = {"file": "identify/data/corrections.json (`itr corrections show`)",
+                          **{k: prov[k] for k in _SHIPPED_KEYS if k in prov}}
+    if "runtime" in sources:
+        fa = ident.settings.faithful
+        rounds = ident.fidelity_rounds
+        rec["runtime"] = {
+            "boxes_um": {f: r["box_um"] for f, r in models.items() if r["source"] == "runtime"},
+            "voxels_um": [fa.coarse_voxel_um, fa.voxel_um], "packings": fa.packings,
+            "seed": fa.seed, "rounds": len(rounds),
+            "converged": bool(rounds and rounds[-1].get("converged")),
+            "move_tolerance": fa.move_tolerance}
+    return rec
+
+
+def runs_record(idents: Mapping[str, Identification]) -> dict:
+    """:func:`level_record` of every parametrisation (the manifest's ``fidelity``)."""
+    return {p: level_record(i) for p, i in idents.items()}
+
+
+def _pct(u: float) -> str:
+    return f"{100 * u:.1f} %"
+
+
+def level_lines(ident: Identification) -> list[str]:
+    """The record as the report's sentences: what corrected which model, from what."""
+    rec = level_record(ident)
+    s = ident.settings
+    by: dict[str, list[str]] = {}
+    for f, r in rec["models"].items():
+        by.setdefault(str(r["source"]), []).append(f)
+    cheap = f"the cheap RVE ({s.box_um:g} um box, {s.voxel_um:g} um voxels)"
+    lines = [f"Fidelity `{rec['level']}`, {ident.parametrisation} parametrisation; "
+             f"{rec['faithful_solves_this_run']} faithful full solves ran in this run."]
+    if "shipped" in by:
+        sh = rec["shipped"]
+        boxes = ", ".join(f"{k} {v:g} um" for k, v in sh.get("boxes_um", {}).items())
+        voxels = "; ".join(f"{k} {' and '.join(f'{v:g}' for v in vs)} um"
+                           for k, vs in sh.get("voxels_per_system_um", {}).items())
+        factors = ", ".join(f"{f} x{rec['models'][f]['factor']:.3f} "
+                            f"(+-{_pct(rec['models'][f]['relative_sd'])})" for f in by["shipped"])
+        lines.append(
+            f"- shipped corrections ({len(by['shipped'])} models, {sh['file']}; plan "
+            f"{sh.get('plan')}, {sh.get('date')}, commit {str(sh.get('commit'))[:10]}): k of "
+            f"converged boxes ({boxes}; voxels {voxels}, the voxel bias extrapolated where "
+            f"two are given; {sh.get('packings')} packings, seeds {sh.get('seeds')}) over k "
+            f"of {cheap}, computed once and read here: no solve of this run made them. "
+            f"Factors at the best values: {factors}.")
+    if "runtime" in by:
+        rt = rec["runtime"]
+        boxes = ", ".join(f"{f} {b:g} um" for f, b in rt["boxes_um"].items())
+        factors = ", ".join(f"{f} x{rec['models'][f]['factor']:.3f} "
+                            f"(+-{_pct(rec['models'][f]['relative_sd'])})" for f in by["runtime"])
+        lines.append(
+            f"- corrected in this run ({len(by['runtime'])} models): full solves of "
+            f"{rt['packings']} faithful packings per formulation (boxes {boxes}; voxel bias "
+            f"removed by Richardson over {rt['voxels_um'][0]:g} and {rt['voxels_um'][1]:g} "
+            f"um) at the best point, {rt['rounds']} rounds, "
+            + ("converged" if rt["converged"] else "not converged")
+            + f" (the best point moved less than {rt['move_tolerance']:g} of its 90 % "
+            f"interval). Factors: {factors}.")
+    if "none" in by:
+        why = {str(rec["models"][f].get("why", "")) for f in by["none"]} - {""}
+        lines.append(f"- not corrected ({', '.join(by['none'])}): the numbers of {cheap}"
+                     + (f" ({'; '.join(sorted(why))})" if why else "") + ".")
+    return lines
