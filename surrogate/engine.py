@@ -528,16 +528,18 @@ def _spec_gpu_cluster(devices: Sequence[str], memory_per_worker: int):
 
 
 def ready_workers(client, scheduler: str | None, solver: str | None = None, *,
-                  timeout: float = 60) -> int:
+                  timeout: float = 60, memory_per_worker: int | None = None) -> int:
     """Number of workers on ``client``'s cluster once it can run ``solver``'s solves: waits
-    up to ``timeout`` s for a first worker of an external ``scheduler``, and, for a solver
-    that needs a GPU, requires a worker that declares the resource ``GPU``. Call it before
+    up to ``timeout`` s for a first worker of an external ``scheduler``; there, where
+    ``memory_per_worker`` (bytes, :func:`worker_memory_limit` of one task) is given, requires
+    a worker whose memory limit holds it (a worker without a limit is taken to); for a
+    solver that needs a GPU, a worker that declares the resource ``GPU``. Call it before
     submitting anything.
 
     Raises
     ------
     ValueError
-        One line: no worker joined; or no worker declares a GPU.
+        One line: no worker joined; no worker has the memory; or no worker declares a GPU.
     """
     workers = client.scheduler_info().get("workers", {})
     if not workers:
@@ -548,6 +550,13 @@ def ready_workers(client, scheduler: str | None, solver: str | None = None, *,
                              f"{timeout:.0f} s; start workers with 'dask worker ADDRESS'"
                              ) from None
         workers = client.scheduler_info().get("workers", {})
+    limits = [int(w.get("memory_limit") or 0) for w in workers.values()]
+    if scheduler and memory_per_worker and all(0 < m < memory_per_worker for m in limits):
+        raise ValueError(f"--scheduler: no worker of {scheduler!r} has the memory one task "
+                         f"needs (~{memory_per_worker / 1e9:.1f} GB as a worker's limit; the "
+                         f"largest has {max(limits) / 1e9:.1f} GB); start workers with "
+                         "'dask worker ADDRESS --memory-limit' of at least that, or use a "
+                         "coarser voxel or a smaller box")
     if needs_gpu(solver) and not any((w.get("resources") or {}).get("GPU", 0) >= 1
                                      for w in workers.values()):
         why = (f"no worker of --scheduler {scheduler!r} ({counted(len(workers), 'worker')} "
@@ -618,18 +627,17 @@ class SolveEngine:
     def _ensure_client(self, shape: Sequence[int], solver: str | None = None):
         """The client (a LocalCluster made on first use, with GPU workers where ``solver``
         needs them), checked by :func:`ready_workers` for ``solver`` before any submit."""
+        from itr_fv.solvers.resources import estimate_peak_memory
+
+        # sized by the backend's name: the client may have no GPU (its workers do)
+        backend = solver_choice(solver or DEFAULT_SOLVER).backend
+        need = worker_memory_limit(estimate_peak_memory(shape, backend, store_fields=True))
         with self._lock:
             if self._client is None:
-                from itr_fv.solvers.resources import estimate_peak_memory
-
-                # sized by the backend's name: the client may have no GPU (its workers do)
-                backend = solver_choice(solver or DEFAULT_SOLVER).backend
-                need = worker_memory_limit(
-                    estimate_peak_memory(shape, backend, store_fields=True))
                 self._client, self._cluster = open_client(
                     self.workers, self.scheduler, memory_per_worker=need, echo=self.echo,
                     solver=solver)
-            ready_workers(self._client, self.scheduler, solver)
+            ready_workers(self._client, self.scheduler, solver, memory_per_worker=need)
             return self._client
 
     def close(self) -> None:
@@ -725,14 +733,10 @@ class SolveEngine:
         none from an earlier run, 24 geometry builds``."""
         where = (f"on scheduler {self.scheduler}" if self.scheduler else
                  f"on {self.workers} local workers" if self.workers else "in this process")
-        repeated = (f" ({_count(self.repeated, 'request')} repeated a solve of this run)"
+        repeated = (f" ({counted(self.repeated, 'request')} repeated a solve of this run)"
                     if self.repeated else "")
-        earlier = (f"{_count(self.earlier, 'request')} from the store of an earlier run"
+        earlier = (f"{counted(self.earlier, 'request')} from the store of an earlier run"
                    if self.earlier else "none from an earlier run")
-        return (f"{_count(self.solved, 'full solve')} {where}{repeated}, {earlier}, "
-                f"{_count(self.geometry_builds, 'geometry build')}")
+        return (f"{counted(self.solved, 'full solve')} {where}{repeated}, {earlier}, "
+                f"{counted(self.geometry_builds, 'geometry build')}")
 
-
-def _count(n: int, noun: str) -> str:
-    """``1 full solve``, ``2 full solves``."""
-    return f"{n} {noun}{'' if n == 1 else 's'}"

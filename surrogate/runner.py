@@ -281,12 +281,14 @@ def _run_here(campaign: Campaign, store: CampaignStore, todo: list[Task], n_task
 
 def _ready_workers(client, scheduler: str | None, campaign: Campaign) -> int:
     """Number of workers once the cluster can run the campaign's solver
-    (:func:`surrogate.engine.ready_workers`: a first worker within 60 s, a GPU worker for a
-    GPU solver); a CampaignError before anything is submitted otherwise."""
+    (:func:`surrogate.engine.ready_workers`: a first worker within 60 s, one whose memory
+    limit holds a task, a GPU worker for a GPU solver); a CampaignError before anything is
+    submitted otherwise."""
     from .engine import ready_workers
 
     try:
-        return ready_workers(client, scheduler, campaign.solver)
+        return ready_workers(client, scheduler, campaign.solver,
+                             memory_per_worker=worker_memory(campaign))
     except ValueError as err:
         raise CampaignError(str(err)) from None
 

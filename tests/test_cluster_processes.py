@@ -273,6 +273,20 @@ def test_a_gpu_solver_is_refused_before_submitting_when_no_worker_declares_a_gpu
         assert engine.solved == 0
 
 
+def test_a_task_no_worker_has_the_memory_for_is_refused_before_submitting(
+        cluster, tmp_path, monkeypatch, capsys):
+    """1200^3 voxels on the external workers: their memory limit (the machine's, a few tens
+    of GB) cannot hold one task; refused in one line before the folder or any task."""
+    address, _ = cluster
+    monkeypatch.chdir(tmp_path)
+    Path("huge.toml").write_text(TINY.read_text().replace("voxel_um = 0.25", "voxel_um = 0.005"))
+    code, out, err = itr_main(capsys, "campaign", "run", "huge.toml", "--out", "h",
+                              "--scheduler", address, "--no-progress")
+    assert code == 2 and err.count("\n") == 1, err
+    assert f"--scheduler: no worker of '{address}' has the memory one task needs" in err
+    assert not Path("h").exists()
+
+
 # campaign-tiny with 4 replicas, one parameter set per task: 24 tasks of 24^3
 MANY = TINY.read_text().replace("replicas = 2", "replicas = 4") \
     .replace("block_size = 3", "block_size = 1").replace('name = "tiny"', 'name = "many"')
