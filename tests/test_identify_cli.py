@@ -69,6 +69,11 @@ def test_identify_bad_tables_fail_in_one_line(tmp_path, capsys, text, expected):
 
 @pytest.mark.parametrize("args, expected", [
     (["identify", "missing.csv"], "MEASUREMENTS"),
+    (["identify"], "MEASUREMENTS: give a CSV file of your measurements, or --example"),
+    (["identify", "mine.csv", "--example"], "MEASUREMENTS: give a CSV file"),
+    (["identify", "--example", "--readings"], "--readings: the shipped Table 3"),
+    # --example reads the shipped Table 3: its 12 formulations reach the memory estimate
+    (["identify", "--example", "--voxel-um", "0.005"], "memory: the run on 2400^3 voxels"),
     (["reproduce", "--voxel-um", "0.3", "--box-um", "8"], "box_um/voxel_um: a 8 um box"),
     (["reproduce", "--replicas", "1"], "--replicas"),
     (["reproduce", "--parametrisation", "spots"], "--parametrisation"),
