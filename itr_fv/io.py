@@ -18,8 +18,8 @@ import tempfile
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
-__all__ = ["output_file", "atomic_path", "write_text", "sha256", "counted", "read_manifest",
-           "read_toml", "watch_writes", "MANIFEST", "TMP_PREFIX"]
+__all__ = ["output_file", "file_above", "atomic_path", "write_text", "sha256", "counted",
+           "read_manifest", "read_toml", "watch_writes", "MANIFEST", "TMP_PREFIX"]
 
 MANIFEST = "manifest.json"
 #: Name prefix of the temporary file of a write in progress.
@@ -50,12 +50,19 @@ def output_file(path: str | os.PathLike, suffix: str | None = None,
         raise ValueError(f"{argument}: expected a {suffix} file name, got {str(p)!r}")
     if p.is_dir():
         raise ValueError(f"{argument}: {str(p)!r} is a folder; give a file name inside it")
-    for parent in p.parents:
-        if parent.exists():
-            if not parent.is_dir():
-                raise ValueError(f"{argument}: {str(parent)!r} exists and is not a folder")
-            break
+    blocking = file_above(p)
+    if blocking is not None:
+        raise ValueError(f"{argument}: {str(blocking)!r} exists and is not a folder")
     return p
+
+
+def file_above(path: str | os.PathLike) -> Path | None:
+    """The nearest existing parent of ``path`` where that is not a folder (so nothing can be
+    made below it), else None."""
+    for parent in Path(path).parents:
+        if parent.exists():
+            return None if parent.is_dir() else parent
+    return None
 
 
 @contextlib.contextmanager

@@ -35,7 +35,7 @@ from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
 
-from .io import MANIFEST, TMP_PREFIX, read_manifest, sha256, watch_writes, write_text
+from .io import MANIFEST, TMP_PREFIX, file_above, read_manifest, sha256, watch_writes, write_text
 
 __all__ = ["FolderRefused", "PACKAGE", "check", "claim", "release", "claimed", "signature",
            "signature_of", "begin_run", "write_manifest", "versions"]
@@ -126,11 +126,9 @@ def check(folder: str | os.PathLike, command: str, *, argument: str = "--out") -
     shown = f"{argument}: {str(folder)!r}"
     if path.exists() and not path.is_dir():
         raise FolderRefused(f"{shown} is a file, not a folder")
-    for parent in path.parents:
-        if parent.exists():
-            if not parent.is_dir():
-                raise FolderRefused(f"{argument}: {str(parent)!r} is a file, not a folder")
-            break
+    blocking = file_above(path)
+    if blocking is not None:
+        raise FolderRefused(f"{argument}: {str(blocking)!r} is a file, not a folder")
     if not path.is_dir() or not any(path.iterdir()):
         return None
     entries = sorted(e.name for e in path.iterdir() if not e.name.startswith(TMP_PREFIX))

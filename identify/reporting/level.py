@@ -59,8 +59,10 @@ def runs_record(idents: Mapping[str, Identification]) -> dict:
     return {p: level_record(i) for p, i in idents.items()}
 
 
-def _pct(u: float) -> str:
-    return f"{100 * u:.1f} %"
+def _factors(rec: dict, names: list[str]) -> str:
+    """``Al2O3-55 x1.041 (+-0.5 %), ...``: the factors of the models ``names``."""
+    return ", ".join(f"{f} x{rec['models'][f]['factor']:.3f} "
+                     f"(+-{100 * rec['models'][f]['relative_sd']:.1f} %)" for f in names)
 
 
 def level_lines(ident: Identification) -> list[str]:
@@ -78,8 +80,7 @@ def level_lines(ident: Identification) -> list[str]:
         boxes = ", ".join(f"{k} {v:g} um" for k, v in sh.get("boxes_um", {}).items())
         voxels = "; ".join(f"{k} {' and '.join(f'{v:g}' for v in vs)} um"
                            for k, vs in sh.get("voxels_per_system_um", {}).items())
-        factors = ", ".join(f"{f} x{rec['models'][f]['factor']:.3f} "
-                            f"(+-{_pct(rec['models'][f]['relative_sd'])})" for f in by["shipped"])
+        factors = _factors(rec, by["shipped"])
         lines.append(
             f"- shipped corrections ({len(by['shipped'])} models, {sh['file']}; plan "
             f"{sh.get('plan')}, {sh.get('date')}, commit {str(sh.get('commit'))[:10]}): k of "
@@ -90,8 +91,7 @@ def level_lines(ident: Identification) -> list[str]:
     if "runtime" in by:
         rt = rec["runtime"]
         boxes = ", ".join(f"{f} {b:g} um" for f, b in rt["boxes_um"].items())
-        factors = ", ".join(f"{f} x{rec['models'][f]['factor']:.3f} "
-                            f"(+-{_pct(rec['models'][f]['relative_sd'])})" for f in by["runtime"])
+        factors = _factors(rec, by["runtime"])
         lines.append(
             f"- corrected in this run ({len(by['runtime'])} models): full solves of "
             f"{rt['packings']} faithful packings per formulation (boxes {boxes}; voxel bias "
