@@ -18,6 +18,15 @@ counts per range, one writes at the counted offsets. (numba's ``parallel=True`` 
 same, but compiles each ``prange`` loop into its own function: 14 s of compilation for these
 kernels on two cores, against 5 s serial.) Compiled once per argument type and cached on
 disk (:mod:`itr_fv.numba_cache`).
+
+Bounded calls: no kernel call does more than about 0.1 s of work (:data:`SCAN_VOXELS`,
+:data:`FACE_WORK`, :data:`ZONE_CELLS`, :data:`SEGMENT_ROWS`): the ranges are cut that fine
+on any thread count, and the sequential kernels (:func:`zone_fill`,
+:func:`first_segments`) run zone range after zone range, resuming where the last call
+stopped. Between calls the main thread is back in Python, or waiting on the pool where
+signals reach it too, so Ctrl-C or a SIGTERM handler that raises stops a build within a
+call (a thread pool lets its running calls end first). The results do not depend on the
+cuts.
 """
 
 from __future__ import annotations
@@ -36,8 +45,8 @@ import numpy as np
 from ..numba_cache import njit
 
 __all__ = ["SERIAL_BELOW", "threads_for", "using_threads", "current_threads", "chunk_ranges",
-           "parallel_map", "interface_faces", "sphere_faces", "zone_fill", "zone_segment_faces",
-           "first_segments", "parallel_copy"]
+           "cost_ranges", "zone_cells", "parallel_map", "interface_faces", "sphere_faces",
+           "zone_fill", "zone_segment_faces", "first_segments", "parallel_copy"]
 
 _SER = dict(fastmath=False, nogil=True)
 
@@ -49,6 +58,18 @@ _THREADS: ContextVar[int | None] = ContextVar("itr_fv_geometry_threads", default
 #: Ranges per thread in :func:`chunk_ranges` (zones differ in size: several per thread even
 #: out the load).
 CHUNKS_PER_THREAD = 4
+
+# The most work of one kernel call (measured on two loaded cores, 320^3 and 640^3 grids of
+# 60 % Al2O3: 70 ms at most).
+#: Voxels of the rows one call of the face scan reads (about 15 ns a voxel).
+SCAN_VOXELS = 1 << 22
+#: Faces one call of :func:`sphere_faces` visits (about 70 ns a face).
+FACE_WORK = 1 << 19
+#: Cells of the zone boxes one call of :func:`zone_fill` or :func:`zone_segment_faces`
+#: visits (the latter: three times, once per axis).
+ZONE_CELLS = 1 << 20
+#: Rows of zone faces one call of :func:`first_segments` reads.
+SEGMENT_ROWS = 1 << 20
 
 
 def threads_for(n_voxels: int, workers: int | None = None) -> int:
@@ -82,12 +103,37 @@ def current_threads(n_voxels: int) -> int:
     return threads_for(n_voxels) if n is None else n
 
 
-def chunk_ranges(n: int, threads: int) -> list[tuple[int, int]]:
+def chunk_ranges(n: int, threads: int, most: int | None = None) -> list[tuple[int, int]]:
     """Consecutive ranges ``(lo, hi)`` covering ``range(n)``: one on one thread, else
-    :data:`CHUNKS_PER_THREAD` per thread (at most n)."""
+    :data:`CHUNKS_PER_THREAD` per thread (at most n); more, of equal length, where a range
+    would hold more than ``most`` items."""
     parts = 1 if threads <= 1 else max(1, min(n, threads * CHUNKS_PER_THREAD))
+    if most is not None and n > 0:
+        parts = max(parts, -(-n // max(1, int(most))))
     ends = [n * k // parts for k in range(parts + 1)]
     return [(ends[k], ends[k + 1]) for k in range(parts)]
+
+
+def cost_ranges(cost: np.ndarray, threads: int, budget: float) -> list[tuple[int, int]]:
+    """The ranges of :func:`chunk_ranges` over ``range(cost.size)``, each cut further into
+    consecutive ranges whose summed ``cost`` stays within ``budget`` (a range holds at
+    least one item)."""
+    cum = np.concatenate([[0.0], np.cumsum(np.asarray(cost, dtype=np.float64))])
+    out = []
+    for lo, hi in chunk_ranges(cost.size, threads):
+        if lo == hi:
+            out.append((lo, hi))
+        while lo < hi:
+            end = int(np.searchsorted(cum, cum[lo] + budget, side="right")) - 1
+            end = min(hi, max(lo + 1, end))
+            out.append((lo, end))
+            lo = end
+    return out
+
+
+def zone_cells(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """Cells in the box ``lo..hi`` (inclusive, int64 (Z, 3)) of every zone."""
+    return np.prod(np.maximum(hi - lo + 1, 0), axis=1)
 
 
 def parallel_map(task: Callable[[Any], Any], items: Sequence[Any], threads: int) -> list:
@@ -99,13 +145,15 @@ def parallel_map(task: Callable[[Any], Any], items: Sequence[Any], threads: int)
 
 
 def parallel_copy(a: np.ndarray, threads: int) -> np.ndarray:
-    """A C-contiguous copy of ``a``, copied by ranges of its first axis on ``threads`` threads
-    (a large fresh array is mostly page faults: they run in parallel too)."""
-    if threads <= 1 or a.ndim == 0:
+    """A C-contiguous copy of ``a``, copied by ranges of its first axis (of at most
+    :data:`SCAN_VOXELS` elements) on ``threads`` threads (a large fresh array is mostly page
+    faults: they run in parallel too)."""
+    if a.ndim == 0:
         return np.array(a, order="C", copy=True)
     out = np.empty(a.shape, dtype=a.dtype)
+    rows = SCAN_VOXELS // max(1, math.prod(a.shape[1:]))
     parallel_map(lambda r: np.copyto(out[r[0]:r[1]], a[r[0]:r[1]]),
-                 chunk_ranges(a.shape[0], threads), threads)
+                 chunk_ranges(a.shape[0], threads, rows), threads)
     return out
 
 
@@ -168,7 +216,8 @@ def interface_faces(pid: np.ndarray, mid: np.ndarray, d: int, threads: int = 1
     """
     e_i = np.zeros(0, dtype=np.int64)
     e_p, e_m = np.zeros(0, dtype=pid.dtype), np.zeros(0, dtype=mid.dtype)
-    ranges = chunk_ranges(pid.shape[0], threads)
+    ranges = chunk_ranges(pid.shape[0], threads,
+                          SCAN_VOXELS // max(1, pid.shape[1] * pid.shape[2]))
     counts = np.array(parallel_map(
         lambda r: _scan_rows(pid, mid, d, r[0], r[1], 0, e_i, e_p, e_p, e_m, e_m, False),
         ranges, threads), dtype=np.int64)
@@ -306,8 +355,9 @@ def sphere_faces(idx: np.ndarray, p_lo: np.ndarray, p_hi: np.ndarray, d: int,
     gap = np.zeros(at.size)
     shift = np.zeros((at.size, 3), dtype=np.int64)
     box = np.array(shape, dtype=np.float64) * h
-    tasks = [(f0, f1, 0, 0) for f0, f1 in chunk_ranges(m, threads)] if staircase else []
-    tasks += [(0, 0, c0, c1) for c0, c1 in chunk_ranges(at.size, threads)]
+    tasks = [(f0, f1, 0, 0) for f0, f1 in chunk_ranges(m, threads, FACE_WORK)] \
+        if staircase else []
+    tasks += [(0, 0, c0, c1) for c0, c1 in chunk_ranges(at.size, threads, FACE_WORK)]
     parallel_map(lambda t: _sphere_faces(t[0], t[1], t[2], t[3], idx, p_lo, p_hi, at, d,
                                          shape[1], shape[2], h, centers, radii, box, s, film,
                                          gap, shift), tasks, threads)
@@ -315,19 +365,32 @@ def sphere_faces(idx: np.ndarray, p_lo: np.ndarray, p_hi: np.ndarray, d: int,
 
 
 # ------------------------------------------------------------------ contact zones
-@njit(**_SER)
-def zone_fill(pid, mid, mat_of, za, zb, ca, cb, ra, rb, u, dist, rho_max, lo, hi,
-              h):  # pragma: no cover - compiled
+def zone_fill(pid: np.ndarray, mid: np.ndarray, mat_of: np.ndarray, za: np.ndarray,
+              zb: np.ndarray, ca: np.ndarray, cb: np.ndarray, ra: np.ndarray, rb: np.ndarray,
+              u: np.ndarray, dist: np.ndarray, rho_max: np.ndarray, lo: np.ndarray,
+              hi: np.ndarray, h: float) -> int:
     """Give the matrix voxels of every zone's thin wedge to the nearer sphere, zone after
-    zone (:func:`itr_fv.discrete.contact_zones.fill_thin_films`); returns the number of
-    voxels written.
+    zone (:func:`itr_fv.discrete.contact_zones.fill_thin_films`), in place; returns the
+    number of voxels written.
 
     A voxel is free for a zone when it was matrix before the zone (a voxel an earlier zone
-    took is not free); within one zone every selected cell is written, in cell order.
+    took is not free); within one zone every selected cell is written, in cell order. Runs
+    in calls of at most :data:`ZONE_CELLS` cells, in zone order.
     """
+    filled = 0
+    for z0, z1 in cost_ranges(zone_cells(lo, hi), 1, ZONE_CELLS):
+        filled += _zone_fill(pid, mid, mat_of, za, zb, ca, cb, ra, rb, u, dist, rho_max, lo,
+                             hi, h, z0, z1)
+    return int(filled)
+
+
+@njit(**_SER)
+def _zone_fill(pid, mid, mat_of, za, zb, ca, cb, ra, rb, u, dist, rho_max, lo, hi, h, z0,
+               z1):  # pragma: no cover - compiled
+    """Zones z0..z1-1 of :func:`zone_fill`; returns the number of voxels written."""
     n1, n2, n3 = pid.shape
     filled = 0
-    for z in range(za.size):
+    for z in range(z0, z1):
         e0, e1, e2 = hi[z, 0] - lo[z, 0] + 1, hi[z, 1] - lo[z, 1] + 1, hi[z, 2] - lo[z, 2] + 1
         if e0 <= 0 or e1 <= 0 or e2 <= 0:
             continue
@@ -484,7 +547,7 @@ def zone_segment_faces(shape: tuple[int, int, int], zones: dict, h: float, share
     counts = np.zeros((nz, 3), dtype=np.int64)
     start = np.zeros((nz, 3), dtype=np.int64)
     e_f, e_v = np.zeros(0, dtype=np.int64), np.zeros((0, 4))
-    ranges = chunk_ranges(nz, threads)
+    ranges = cost_ranges(3 * zone_cells(zones["lo"], zones["hi"]), threads, ZONE_CELLS)
     parallel_map(lambda r: _zone_faces(r[0], r[1], *args, counts, start, e_f, e_v, False),
                  ranges, threads)
     by_axis, total = offsets(counts.T.reshape(-1))  # axis, then zone
@@ -496,10 +559,12 @@ def zone_segment_faces(shape: tuple[int, int, int], zones: dict, h: float, share
     return counts, flat, vals
 
 
-@njit(**_SER)
-def first_segments(flat, vals, counts, za, zb, n_faces):  # pragma: no cover - compiled
+def first_segments(flat: np.ndarray, vals: np.ndarray, counts: np.ndarray, za: np.ndarray,
+                   zb: np.ndarray, n_faces: int) -> tuple[np.ndarray, ...]:
     """The rows of ``flat`` (faces of zone after zone: ``counts[z]`` rows of zone z) whose
     face comes first, with their segment values and particle ids.
+
+    Runs in calls of at most :data:`SEGMENT_ROWS` rows, in zone order.
 
     Parameters
     ----------
@@ -515,9 +580,19 @@ def first_segments(flat, vals, counts, za, zb, n_faces):  # pragma: no cover - c
     out = np.empty((4, flat.size))
     pa = np.empty(flat.size, dtype=np.int64)
     pb = np.empty(flat.size, dtype=np.int64)
-    m = 0
-    r = 0
-    for z in range(counts.size):
+    m = r = 0
+    for z0, z1 in cost_ranges(counts, 1, SEGMENT_ROWS):
+        r, m = _first_segments(flat, vals, counts, za, zb, seen, f, out, pa, pb, z0, z1, r, m)
+    return (f[:m].copy(), out[0, :m].copy(), out[1, :m].copy(), out[2, :m].copy(),
+            out[3, :m].copy(), pa[:m].copy(), pb[:m].copy())
+
+
+@njit(**_SER)
+def _first_segments(flat, vals, counts, za, zb, seen, f, out, pa, pb, z0, z1, r,
+                    m):  # pragma: no cover - compiled
+    """Zones z0..z1-1 of :func:`first_segments`, from row ``r`` of ``flat`` with ``m`` rows
+    kept so far (``seen``: bit map of the faces kept); returns the next (r, m)."""
+    for z in range(z0, z1):
         for _ in range(counts[z]):
             v = flat[r]
             bit = np.uint8(1 << (v & 7))
@@ -530,5 +605,4 @@ def first_segments(flat, vals, counts, za, zb, n_faces):  # pragma: no cover - c
                 pb[m] = zb[z] + 1
                 m += 1
             r += 1
-    return (f[:m].copy(), out[0, :m].copy(), out[1, :m].copy(), out[2, :m].copy(),
-            out[3, :m].copy(), pa[:m].copy(), pb[:m].copy())
+    return r, m

@@ -42,7 +42,8 @@ from __future__ import annotations
 import math
 import time
 import warnings
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field
 from typing import NamedTuple
 
@@ -57,12 +58,12 @@ from ..materials.psd import (
     fit_truncated_sample,
     phi_rcp_lognormal,
 )
-from .microstructure import Microstructure
+from .microstructure import Microstructure, grid_slabs, label_counts
 from .packing import pack_spheres, pairs_within_gap
 from .spec import RVESpec, voxels_per_edge
 
 __all__ = ["FillerSpec", "FillerReport", "RVEReport", "generate_rve", "packing_limit",
-           "build_rve", "PackedRVE", "SizeCut", "size_cut"]
+           "build_rve", "PackedRVE", "SizeCut", "size_cut", "stage_bar"]
 
 
 @dataclass(frozen=True)
@@ -408,15 +409,59 @@ def size_cut(spec: FillerSpec, box_um: float, voxel_um: float, *,
 
 
 def _face_contacts(pid: np.ndarray) -> int:
+    """Voxel faces between two different particles (periodic), counted slab by slab."""
     n = 0
-    for ax in range(3):
-        q = np.roll(pid, -1, axis=ax)
-        n += int(np.count_nonzero((pid != q) & (pid > 0) & (q > 0)))
+    for rows in grid_slabs(pid.shape):
+        p = pid[rows]
+        below = pid[np.arange(rows.start + 1, rows.stop + 1) % pid.shape[0]]
+        for q in (below, np.roll(p, -1, axis=1), np.roll(p, -1, axis=2)):
+            n += int(np.count_nonzero((p != q) & (p > 0) & (q > 0)))
     return n
 
 
 #: Upper edges of the gap distribution of ``RVEReport.gap_counts``, um.
 GAP_BINS_UM = (0.002, 0.005, 0.02, 0.1, 0.5)
+
+#: A stage of :func:`generate_rve` shows its progress bar once it has run this long, s.
+PROGRESS_DELAY_S = 1.0
+
+#: Steps of a stage's progress bar.
+_BAR_STEPS = 1000
+
+
+@contextmanager
+def stage_bar(desc: str, enabled: bool = True) -> Iterator[Callable[[float], None] | None]:
+    """A progress bar for one stage of an RVE build, fed with the fraction done.
+
+    A ``tqdm`` bar (``tqdm.auto``: stderr in a terminal) that appears only once the stage
+    has lasted :data:`PROGRESS_DELAY_S` (fast stages print nothing) and is removed when it
+    ends; it shows the percentage, elapsed and remaining time.
+
+    Parameters
+    ----------
+    desc : str
+        The stage (``"packing"``, ``"voxelizing"``).
+    enabled : bool
+        False: no bar, the block gets None.
+
+    Yields
+    ------
+    callable or None
+        ``update(fraction)``, fraction in [0, 1].
+    """
+    if not enabled:
+        yield None
+        return
+    from tqdm.auto import tqdm
+
+    with tqdm(total=_BAR_STEPS, desc=desc, delay=PROGRESS_DELAY_S, leave=False,
+              bar_format="{desc}: {percentage:3.0f}%|{bar}| [{elapsed}<{remaining}]") as bar:
+        def update(fraction: float) -> None:
+            step = min(_BAR_STEPS, int(fraction * _BAR_STEPS))
+            if step > bar.n:
+                bar.update(step - bar.n)
+
+        yield update
 
 
 # --------------------------------------------------------------------------- main
@@ -426,7 +471,7 @@ def generate_rve(specs: Sequence[FillerSpec] | FillerSpec, box_um: float, voxel_
                  min_diameter_voxels: float = 2.0, max_diameter_box_ratio: float = 1.0 / 3.0,
                  contact_gap_um: float | None = None, inflate: float = 1e-3,
                  max_iter: int = 400_000, sampling: str = "stratified",
-                 return_report: bool = False
+                 return_report: bool = False, progress: bool = True
                  ) -> Microstructure | tuple[Microstructure, RVEReport]:
     """Dense periodic RVE of non-overlapping lognormal polydisperse spheres.
 
@@ -474,6 +519,11 @@ def generate_rve(specs: Sequence[FillerSpec] | FillerSpec, box_um: float, voxel_
         ``"iid"``: independent draws.
     return_report : bool
         Return ``(ms, report)`` instead of ``ms``.
+    progress : bool
+        Progress bars (:func:`stage_bar`, on stderr) for the packing and the voxelization
+        when they last over :data:`PROGRESS_DELAY_S`; False: none. Either way the packing
+        returns to Python every few tens of milliseconds, so Ctrl-C and a SIGTERM handler
+        that raises stop it at once.
 
     Returns
     -------
@@ -566,7 +616,9 @@ def generate_rve(specs: Sequence[FillerSpec] | FillerSpec, box_um: float, voxel_
     t_sample = time.perf_counter() - t0
 
     # ------------------------------------------------------------ packing
-    res = pack_spheres(0.5 * d_all, L, rng, min_gap=gap, inflate=inflate, max_iter=max_iter)
+    with stage_bar("packing", progress) as bar:
+        res = pack_spheres(0.5 * d_all, L, rng, min_gap=gap, inflate=inflate,
+                           max_iter=max_iter, progress=bar)
     if not res.converged:
         raise RuntimeError(f"packing did not converge in {res.iterations} sweeps (largest "
                            f"relative overlap {res.max_rel_overlap:.3g}) at total fraction "
@@ -583,15 +635,17 @@ def generate_rve(specs: Sequence[FillerSpec] | FillerSpec, box_um: float, voxel_
     # ------------------------------------------------------------ voxelize
     t2 = time.perf_counter()
     mats = [specs[k].material for k in owner]
-    ms = Microstructure.from_spheres(centers * 1e-6, 0.5 * d_all * 1e-6, mats, box_m=L * 1e-6,
-                                     shape=nvox, matrix=matrix)
+    with stage_bar("voxelizing", progress) as bar:
+        ms = Microstructure.from_spheres(centers * 1e-6, 0.5 * d_all * 1e-6, mats,
+                                         box_m=L * 1e-6, shape=nvox, matrix=matrix,
+                                         progress=bar)
     t_vox = time.perf_counter() - t2
     if not return_report:
         return ms
 
     # ------------------------------------------------------------ report
     t3 = time.perf_counter()
-    counts = np.bincount(ms.particle_ids.ravel(), minlength=d_all.size + 1)[1:]
+    counts = label_counts(ms.particle_ids, d_all.size + 1)[1:]
     nvox3 = float(nvox) ** 3
     fillers: list[FillerReport] = []
     for k, s in enumerate(specs):
@@ -637,7 +691,8 @@ class PackedRVE(NamedTuple):
 
 
 def build_rve(spec: RVESpec, fillers: Sequence[FillerSpec] | FillerSpec, replica: int, *,
-              matrix: str = "silicone", warn_box_cut: bool = True) -> PackedRVE:
+              matrix: str = "silicone", warn_box_cut: bool = True,
+              progress: bool = True) -> PackedRVE:
     """Pack replica ``replica`` of an RVE: the package's one way to build one.
 
     Parameters
@@ -653,6 +708,9 @@ def build_rve(spec: RVESpec, fillers: Sequence[FillerSpec] | FillerSpec, replica
     warn_box_cut : bool
         Let :func:`generate_rve`'s warning about the box cutting the coarse tail through
         (False where the caller reports the cut itself).
+    progress : bool
+        :func:`generate_rve`'s progress bars (shown only for stages that last over a
+        second).
 
     Returns
     -------
@@ -680,7 +738,8 @@ def build_rve(spec: RVESpec, fillers: Sequence[FillerSpec] | FillerSpec, replica
                               min_gap_um=spec.min_gap_um, matrix=matrix,
                               tail_quantile=spec.tail_quantile,
                               max_diameter_box_ratio=spec.max_diameter_box_ratio,
-                              min_diameter_voxels=spec.min_diameter_voxels)
+                              min_diameter_voxels=spec.min_diameter_voxels,
+                              progress=progress)
         return PackedRVE(ms, seed)
 
     for seed in retries:

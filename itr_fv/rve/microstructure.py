@@ -4,14 +4,36 @@ from __future__ import annotations
 
 import math
 import warnings
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
 from ..checks import finite_number, phase_name
 
-__all__ = ["Microstructure", "ParticleTable"]
+__all__ = ["Microstructure", "ParticleTable", "grid_slabs", "label_counts"]
+
+#: Voxels one NumPy call of a whole-grid pass handles (tens of milliseconds): a 640^3 grid
+#: in one call would hold the interpreter, and its signal handlers, for seconds.
+SLAB_VOXELS = 1 << 22
+
+
+def grid_slabs(shape: tuple[int, ...]) -> list[slice]:
+    """Consecutive ranges of the first axis of about :data:`SLAB_VOXELS` voxels each."""
+    rows = max(1, SLAB_VOXELS // max(1, math.prod(shape[1:])))
+    return [slice(i, min(i + rows, shape[0])) for i in range(0, shape[0], rows)]
+
+
+def label_counts(labels: np.ndarray, minlength: int = 0) -> np.ndarray:
+    """``np.bincount(labels.ravel(), minlength=minlength)`` of a voxel array of labels >= 0,
+    counted slab by slab (:data:`SLAB_VOXELS`)."""
+    flat = labels.reshape(-1)
+    counts = np.zeros(int(minlength), dtype=np.intp)
+    for k in range(0, flat.size, SLAB_VOXELS):
+        part = np.bincount(flat[k:k + SLAB_VOXELS], minlength=counts.size)
+        part[:counts.size] += counts
+        counts = part
+    return counts
 
 
 @dataclass(frozen=True)
@@ -204,7 +226,8 @@ class Microstructure:
     @classmethod
     def from_spheres(cls, centers_m: np.ndarray, radii_m: np.ndarray,
                      materials: Sequence[str] | str, box_m: float | Sequence[float],
-                     shape: int | Sequence[int], matrix: str = "matrix") -> "Microstructure":
+                     shape: int | Sequence[int], matrix: str = "matrix", *,
+                     progress: Callable[[float], object] | None = None) -> "Microstructure":
         """Voxelize periodic spheres (minimum image) on a grid of cubic voxels.
 
         A voxel belongs to a sphere when its centre lies inside it; where spheres
@@ -224,6 +247,9 @@ class Microstructure:
             Voxels per axis; ``box_m / shape`` must be the same h on every axis.
         matrix : str
             Name of the matrix phase.
+        progress : callable, optional
+            Called with the fraction of the spheres voxelized (rising to 1), a few hundred
+            times at most; for a progress bar.
         """
         n = _shape3(shape)
         box = np.broadcast_to(np.asarray(box_m, dtype=np.float64), (3,)).copy() \
@@ -266,9 +292,11 @@ class Microstructure:
                 phase_names.append(m)
         mat_index = np.array([phase_names.index(m) for m in mats], dtype=np.int32)
         c = np.mod(c, box)
-        pid = _voxelize_spheres(c, r, n, h)
+        pid = _voxelize_spheres(c, r, n, h, progress=progress)
         lut = np.concatenate([[0], mat_index]).astype(np.int32)
-        mid = lut[pid]
+        mid = np.empty_like(pid)
+        for rows in grid_slabs(pid.shape):
+            mid[rows] = lut[pid[rows]]
         table = ParticleTable(c, r, np.asarray(mats, dtype=str))
         return cls(mid, pid, h, tuple(phase_names), table)
 
@@ -288,7 +316,7 @@ class Microstructure:
 
     def volume_fractions(self) -> dict[str, float]:
         """Voxel volume fraction of every phase."""
-        counts = np.bincount(self.material_ids.ravel(), minlength=len(self.names))
+        counts = label_counts(self.material_ids, len(self.names))
         return {n: float(cnt) / self.material_ids.size for n, cnt in zip(self.names, counts)}
 
     def __repr__(self) -> str:
@@ -297,12 +325,25 @@ class Microstructure:
                 f"particles={self.n_particles}, fractions: {fr})")
 
 
-def _voxelize_spheres(c: np.ndarray, r: np.ndarray, n: tuple[int, int, int],
-                      h: float) -> np.ndarray:
-    """Particle id per voxel (0 = matrix) for periodic spheres; voxel centres at (i + 1/2) h."""
+#: :func:`_voxelize_spheres` reports its progress this many times at most.
+_PROGRESS_REPORTS = 200
+
+
+def _voxelize_spheres(c: np.ndarray, r: np.ndarray, n: tuple[int, int, int], h: float, *,
+                      progress: Callable[[float], object] | None = None) -> np.ndarray:
+    """Particle id per voxel (0 = matrix) for periodic spheres; voxel centres at (i + 1/2) h.
+
+    One sphere at a time in NumPy (returns to Python between spheres, so signal handlers
+    run); ``progress`` gets the fraction of the spheres done.
+    """
     pid = np.zeros(n, dtype=np.int32)
-    best = np.full(n, np.inf, dtype=np.float64)
+    best = np.empty(n, dtype=np.float64)
+    for rows in grid_slabs(n):
+        best[rows] = np.inf
+    every = max(1, c.shape[0] // _PROGRESS_REPORTS)
     for p in range(c.shape[0]):
+        if progress is not None and p % every == 0:
+            progress(p / c.shape[0])
         ranges = []
         for d in range(3):
             lo = math.ceil((c[p, d] - r[p]) / h - 0.5)
@@ -321,4 +362,6 @@ def _voxelize_spheres(c: np.ndarray, r: np.ndarray, n: tuple[int, int, int],
         best[ii] = sub
         cur = pid[ii]
         pid[ii] = np.where(take, p + 1, cur)
+    if progress is not None:
+        progress(1.0)
     return pid
