@@ -19,6 +19,7 @@ __all__ = ["add_parser"]
 def _run(args: argparse.Namespace) -> int:
     from itr_surrogate.campaign import Campaign, CampaignError
     from itr_surrogate.runner import local_workers, run_campaign
+    from itr_surrogate.store import CampaignStore
     from itr_surrogate.workload import campaign_workload
 
     try:
@@ -31,6 +32,10 @@ def _run(args: argparse.Namespace) -> int:
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise CLIError(f"--out: {args.out!r} is a file, not a folder", 2)
+    try:
+        CampaignStore(out).check_for(camp)        # the folder first: nothing written
+    except CampaignError as exc:
+        raise CLIError(str(exc), 2) from None
     planned(campaign_workload(camp, workers=local_workers(args.workers),
                               scheduler=args.scheduler))
     try:

@@ -23,6 +23,7 @@ from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 
 __all__ = ["CLIError", "Parser", "number", "FLAG_NAMES", "flagged", "output_folder", "planned",
+           "refuse_unfit",
            "identification_plan",
            "engine_arguments", "engine_options", "solver_arguments", "solver_option",
            "open_campaign", "rve_arguments", "forward_settings", "read_table",
@@ -81,22 +82,31 @@ def flagged(message: str) -> str:
 
 
 @contextlib.contextmanager
-def output_folder(path: str, job: str, *, folders: Sequence[str] = ()) -> Iterator[Path]:
-    """Claim the ``--out`` folder for ``itr <job>`` before any work
-    (:func:`itr_fv.run_folder.begin_run`: new, empty or an earlier run of the same command;
-    anything else refused in one line, nothing touched); remove it again if the run fails
-    and we made it, unless it keeps finished work in one of its owned ``folders``.
+def output_folder(path: str, job: str, *, folders: Sequence[str] = (),
+                  workload=None) -> Iterator[Path]:
+    """Check the ``--out`` folder for ``itr <job>`` (:func:`itr_fv.run_folder.check`: new,
+    empty or an earlier run of the same command; anything else refused in one line, nothing
+    touched), then refuse a ``workload`` that cannot fit (:func:`refuse_unfit`), then claim
+    the folder (:func:`itr_fv.run_folder.begin_run`) and print the workload's plan; remove
+    the folder again if the run fails and we made it, unless it keeps finished work in one
+    of its owned ``folders``.
 
     Raises
     ------
     CLIError
         (status 2) if ``path`` is a file, lies under a file, holds anything that is not an
-        earlier ``itr <job>`` run's, or cannot be written.
+        earlier ``itr <job>`` run's, or cannot be written; or the workload cannot fit.
     """
     from itr_fv.io import counted
-    from itr_fv.run_folder import FolderRefused, begin_run, release
+    from itr_fv.run_folder import FolderRefused, begin_run, check, release
 
     out = Path(path)
+    try:
+        check(out, f"itr {job}")
+    except FolderRefused as exc:
+        raise CLIError(str(exc), 2) from None
+    if workload is not None:
+        refuse_unfit(workload)
     created = not out.exists()
     try:
         earlier = begin_run(out, job, folders=folders)
@@ -111,6 +121,8 @@ def output_folder(path: str, job: str, *, folders: Sequence[str] = ()) -> Iterat
         print(f"--out: {path!r} holds an earlier 'itr {job}' run: the files its manifest "
               f"lists are replaced" + (f", {counted(kept, 'finished solve')} kept"
                                        if folders else ""), file=sys.stderr)
+    if workload is not None:
+        print(workload.summary())
     try:
         yield out
     except BaseException:
@@ -124,29 +136,34 @@ def output_folder(path: str, job: str, *, folders: Sequence[str] = ()) -> Iterat
 
 
 # ------------------------------------------------------------------- shared by several commands
-def planned(workload) -> None:
+def refuse_unfit(workload) -> None:
     """Refuse (status 2, one line) a :class:`~itr_surrogate.workload.Workload` that cannot
-    fit in memory, else print its plan: before any packing, solving or writing."""
+    fit in memory: before any packing, solving or writing."""
     from itr_surrogate.workload import WorkloadRefused
 
     try:
         workload.check()
     except WorkloadRefused as exc:
         raise CLIError(str(exc), 2) from None
+
+
+def planned(workload) -> None:
+    """:func:`refuse_unfit`, else print the workload's plan (one line)."""
+    refuse_unfit(workload)
     print(workload.summary())
 
 
 def identification_plan(args: argparse.Namespace, settings, formulations, *,
-                        validation: bool) -> None:
-    """:func:`planned` for ``itr identify`` and ``itr reproduce``: the work of identifying
-    ``formulations`` with ``settings`` (a ReproduceSettings)."""
+                        validation: bool):
+    """The :class:`~itr_surrogate.workload.Workload` of ``itr identify`` and ``itr
+    reproduce``: identifying ``formulations`` with ``settings`` (a ReproduceSettings)."""
     from ..forward.workload import identification_workload
     from ..inference.formulations import fractions_of
 
-    planned(identification_workload(
+    return identification_workload(
         settings.forward, {f: fractions_of(f) for f in formulations},
         settings.parametrisations, validation=validation, workers=args.workers,
-        scheduler=args.scheduler))
+        scheduler=args.scheduler)
 
 
 def open_campaign(folder: str):

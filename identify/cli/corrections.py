@@ -17,7 +17,6 @@ from .core import (
     Parser,
     number,
     output_folder,
-    planned,
     solver_arguments,
     solver_option,
 )
@@ -45,12 +44,12 @@ def _build(args: argparse.Namespace) -> int:
         raise CLIError(str(exc), 2) from None
     solver = solver_option(args, plan.solver)
     campaigns = list(plan.campaigns(systems=systems, solver=solver, threads=args.threads))
-    planned(Workload(tuple(
+    work = Workload(tuple(
         campaign_workload(camp, label=folder).grids[0] for folder, camp in campaigns),
-        solver, local_workers(args.workers), args.scheduler))
+        solver, local_workers(args.workers), args.scheduler)
     failed = 0
     with output_folder(args.out, "corrections build",
-                       folders=[folder for folder, _ in campaigns]) as out:
+                       folders=[folder for folder, _ in campaigns], workload=work) as out:
         for folder, camp in campaigns:
             try:
                 summary = run_campaign(camp, out / folder, workers=args.workers,

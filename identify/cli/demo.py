@@ -6,7 +6,7 @@ import argparse
 
 from itr_fv.solvers.choice import DEFAULT_SOLVER
 
-from .core import CLIError, number, output_folder, planned, solver_arguments, solver_option
+from .core import CLIError, number, output_folder, solver_arguments, solver_option
 
 __all__ = ["add_parser"]
 
@@ -19,8 +19,7 @@ def _run(args: argparse.Namespace) -> int:
     voxel = args.box_um / args.n if args.n is not None else args.voxel_um
     settings = DemoSettings(rve=RVESpec(box_um=args.box_um, voxel_um=voxel, seed=args.seed),
                             fraction=args.fraction, solver=solver_option(args), tol=args.tol)
-    planned(demo_workload(settings))
-    with output_folder(args.out, "demo") as out:
+    with output_folder(args.out, "demo", workload=demo_workload(settings)) as out:
         try:
             run_demo(settings, out)
         except RuntimeError as exc:

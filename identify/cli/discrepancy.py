@@ -11,7 +11,6 @@ from .core import (
     engine_options,
     forward_settings,
     output_folder,
-    planned,
     read_table,
     rve_arguments,
 )
@@ -47,10 +46,9 @@ def _run(args: argparse.Namespace) -> int:
         raise CLIError("MEASUREMENTS: " + str(exc).removeprefix("measurements: "), 2) from None
     singles = {f: c for f, c in ((f, fractions_of(f)) for f in meas.formulations)
                if len(c) == 1}
-    planned(tables_workload(settings, singles, solves=n_solves(len(singles), settings,
-                                                               effects),
-                            workers=args.workers, scheduler=args.scheduler))
-    with output_folder(args.out, "discrepancy", folders=("solves",)) as out:
+    plan = tables_workload(settings, singles, solves=n_solves(len(singles), settings, effects),
+                           workers=args.workers, scheduler=args.scheduler)
+    with output_folder(args.out, "discrepancy", folders=("solves",), workload=plan) as out:
         run_discrepancy(meas, settings, out, effects=effects, progress=not args.no_progress,
                         **engine_options(args))
     return 0

@@ -30,8 +30,8 @@ def _run(args: argparse.Namespace) -> int:
                        "tester readings", 2)
     meas = read_table(args.measurements,
                       read_tester_readings if args.readings else read_measurements)
-    identification_plan(args, settings, meas.formulations, validation=False)
-    with output_folder(args.out, "identify", folders=("solves",)) as out:
+    plan = identification_plan(args, settings, meas.formulations, validation=False)
+    with output_folder(args.out, "identify", folders=("solves",), workload=plan) as out:
         run_identify(meas, settings, out, progress=not args.no_progress,
                      **engine_options(args))
     return 0

@@ -20,8 +20,9 @@ def _run(args: argparse.Namespace) -> int:
     from ..workflows.reproduce import run_reproduce
 
     settings = reproduce_settings(args)
-    identification_plan(args, settings, read_measurements().formulations, validation=True)
-    with output_folder(args.out, "reproduce", folders=("solves",)) as out:
+    plan = identification_plan(args, settings, read_measurements().formulations,
+                               validation=True)
+    with output_folder(args.out, "reproduce", folders=("solves",), workload=plan) as out:
         run_reproduce(settings, out, progress=not args.no_progress, **engine_options(args))
     return 0
 

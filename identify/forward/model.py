@@ -291,14 +291,15 @@ class ForwardModel:
                     params.setdefault(parameter_name("Rff", a, b), 1e-7)
         return base.with_parameters(params)
 
-    def pack(self, replica: int):
+    def pack(self, replica: int, *, progress: bool = False):
         """The RVE of one replica (:func:`itr_fv.rve.build_rve`: packing seed
         ``settings.seed + replica``, redrawn with ``+ 100``, ``+ 200``, ... where a packing
         fails; the seed used is kept in :attr:`seeds`). The box cut of the coarse tail is
-        in the report, not a warning."""
+        in the report, not a warning; ``progress``: the packing's bar (shown after a
+        second)."""
         ms, seed = build_rve(self.settings.rve,
                              _specs(self.fractions, self.settings.psd_basis), replica,
-                             matrix=MATRIX, warn_box_cut=False)
+                             matrix=MATRIX, warn_box_cut=False, progress=progress)
         self.seeds.append(seed)
         return ms
 
@@ -319,7 +320,7 @@ class ForwardModel:
         s = self.settings
         if bounds is None:
             bounds = {p: tuple(s.prior_m2K_per_W) for p in self.parameters}
-        self.microstructures = [self.pack(r) for r in range(s.replicas)]
+        self.microstructures = [self.pack(r, progress=progress) for r in range(s.replicas)]
         self.centre = {p: math.sqrt(lo * hi) for p, (lo, hi) in bounds.items()}
         mat = self.materials(self.centre)
         if bounds:

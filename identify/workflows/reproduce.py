@@ -163,7 +163,7 @@ def _identify_all(meas: Measurements, settings: ReproduceSettings, progress: boo
              f"{counted(len(meas.formulations), 'formulation')}")
         idents[par] = identify(meas, par, settings=settings.forward,
                                grid_points=settings.grid_points, seed=settings.seed,
-                               progress=False, echo=echo, engine=engine)
+                               progress=progress, echo=echo, engine=engine)
         post = idents[par].posterior
         best = ", ".join(f"{n} {v:.2e} (90 % {post.interval(n)[0]:.2e} - "
                          f"{post.interval(n)[1]:.2e})" for n, v in post.best.items())
@@ -329,9 +329,10 @@ def _reproduce_markdown(head, idents, meas, validation, lofo, psd_fits, timing,
     lines += ["", "## Files", "",
               "`identified.json` (every value above), `full_solves.parquet` (every full solve "
               "of the run: the raw tensor of its RVE, and for the cheap RVEs `level`, "
-              "`level_factor` and `k_iso_at_level`), `fig2_psd.png`, `fig4_rves.png`, `fig6_parity.png`, "
-              "`fig8_screening.png`, `posterior_*.png`, `temperature_*.vti/.png` (temperature "
-              "on a mid-plane), `flux_*.png` (pyvista render of the heat flux), "
+              "`level_factor` and `k_iso_at_level`), `fig2_psd.png`, `fig4_rves.png`, "
+              "`fig6_parity.png`, `fig8_screening.png`, `posterior_*.png`, "
+              "`temperature_*.vti/.png` (temperature on a mid-plane), `flux_*.png` (pyvista "
+              "render of the heat flux), "
               "`manifest.json` (sizes and SHA-256, settings, versions)."]
     return "\n".join(lines) + "\n"
 

@@ -48,7 +48,7 @@ from dataclasses import asdict, dataclass, field
 from typing import NamedTuple
 
 import numpy as np
-from scipy import special, stats
+from scipy import special
 
 from ..checks import finite_number as _num
 from ..materials.paper_data import TABLE1
@@ -647,6 +647,8 @@ def generate_rve(specs: Sequence[FillerSpec] | FillerSpec, box_um: float, voxel_
     t3 = time.perf_counter()
     counts = label_counts(ms.particle_ids, d_all.size + 1)[1:]
     nvox3 = float(nvox) ** 3
+    from scipy import stats  # here, not at import: 0.9 s every command would wait for
+
     fillers: list[FillerReport] = []
     for k, s in enumerate(specs):
         d = diam[k]
