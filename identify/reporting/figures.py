@@ -206,24 +206,25 @@ def parity_figure(validation: Mapping[str, list[dict]], idents: Mapping[str, Ide
     plt = _pyplot()
     fig, (a, b) = plt.subplots(1, 2, figsize=(11, 4.8))
     check = surrogate_check(validation, idents)
+    level = fidelity_name(next(iter(idents.values())).settings.faithful)
     for par, rows in validation.items():
         pts = check[par]
         a.errorbar([p["full_solve"] for p in pts], [p["reduced_basis"] for p in pts],
                    yerr=[[p["reduced_basis"] - p["lower"] for p in pts],
                          [p["upper"] - p["reduced_basis"] for p in pts]],
                    fmt="o", capsize=2, label=f"{par} ({len(pts)} formulations)")
+        corrected = any(r["level"] != "none" for r in rows)
         b.errorbar([r["measured"] for r in rows], [r["predicted"] for r in rows],
                    xerr=[r["measured_se"] for r in rows], yerr=[r["predicted_sd"] for r in rows],
-                   fmt="o", label=f"ours ({par})")
+                   fmt="o", label=f"ours ({par}, " + (f"at fidelity {level})" if corrected
+                                                        else "raw: not corrected)"))
     table6 = paper_data.paper_validation()
     b.plot([v[0] for v in table6.values()], [v[1] for v in table6.values()], "k^",
            label="paper (Table 6)")
-    level = fidelity_name(next(iter(idents.values())).settings.faithful)
     for ax, (xl, yl, title) in zip((a, b), (
             ("full solve, replica 1, raw (W/(m K))", "reduced basis, replica 1, raw (W/(m K))",
              "surrogate against the full solver (cheap RVE, bounds as bars)"),
-            ("measured mean (W/(m K))", f"predicted at fidelity {level} (W/(m K))",
-             "predictions (Table 6)"))):
+            ("measured mean (W/(m K))", "predicted (W/(m K))", "predictions (Table 6)"))):
         lim = [min(ax.get_xlim()[0], ax.get_ylim()[0]), max(ax.get_xlim()[1], ax.get_ylim()[1])]
         ax.plot(lim, lim, "k:", lw=1, label="equal")
         if ax is b:
@@ -344,14 +345,17 @@ def posterior_figure(ident: Identification, path: Path) -> Path:
     return _save(fig, path)
 
 
-def level_caption(k: float, level: Mapping[str, object] | None, name: str) -> str:
+def level_caption(k: float, level: Mapping[str, object] | None, name: str, *,
+                  sep: str = "; ") -> str:
     """``k`` (W/(m K)) of one cheap RVE said as raw, with its value at the fidelity level
     where ``level`` (:meth:`~itr_identify.forward.model.ForwardModel.level_at`) has a
-    factor other than 1: the figures' k is the report's, or says it is not."""
+    factor other than 1 (after ``sep``): the figures' k is the report's, or says it is
+    not."""
     text = f"{k:.3f} W/(m K) raw (this RVE)"
     factor = float(level["factor"]) if level else 1.0
     if abs(factor - 1.0) > 1e-12:
-        text += f"; at fidelity {name} (x{factor:.3f}, {level['source']}) {k * factor:.3f}"
+        text += (f"{sep}at fidelity {name} (x{factor:.3f}, {level['source']}) "
+                 f"{k * factor:.3f} W/(m K)")
     return text
 
 
@@ -376,7 +380,8 @@ def temperature_figure(result, path: Path, *, level: Mapping[str, object] | None
     fig.colorbar(im, ax=ax, label="temperature (µK; unit gradient 1 K/m along $x_1$)")
     ax.set_xlabel(f"$x_1$ ({MICRO_M})")
     ax.set_ylabel(f"$x_2$ ({MICRO_M})")
-    ax.set_title(f"mid-plane $x_3$ = {(z + 0.5) * h_um:.1f} {MICRO_M}\n$k_{{11}}$ = "
-                 + level_caption(float(result.k_eff[0, 0]), level, level_name), fontsize=9)
+    ax.set_title(f"mid-plane $x_3$ = {(z + 0.5) * h_um:.1f} {MICRO_M}; $k_{{11}}$ = "
+                 + level_caption(float(result.k_eff[0, 0]), level, level_name, sep="\n"),
+                 fontsize=9)
     fig.tight_layout()
     return _save(fig, path)
