@@ -200,7 +200,7 @@ def test_itr_identify_on_workers_in_another_directory_keeps_every_solve_on_the_c
                              "Al2O3-62,1,1.70\nAl2O3-62,2,1.75\nAl2O3-62,3,1.66\n")
     args = ["identify", "m.csv", "--out", "out", "--parametrisation", "gap", "--box-um", "12",
             "--voxel-um", "0.5", "--replicas", "2", "--no-progress", "--fidelity", "quick",
-            "--scheduler", address]
+            "--scheduler", address, "--keep-fields"]   # the snapshots' fields stay: nothing again
     code, out, err = itr_main(capsys, *args)
     assert code == 0, err
     solved = re.search(r"engine: (\d+) full solves on scheduler .*, none from an earlier run",

@@ -223,16 +223,16 @@ def _caveat(budget_entry: dict) -> dict:
 
 
 def fidelity_note(settings, parameters: Mapping[str, object] | None = None,
-                  marked: bool = False, ran: Mapping[str, object] | None = None) -> str:
+                  marked: bool = False, gap: Identification | None = None) -> str:
     """Once, at the top of the headline: what the values of this fidelity are good for. At
     ``quick`` (no faithful correction) they are indicative, with the bias measured against
     ``standard`` on the shipped data (:data:`QUICK_TO_STANDARD`, for the gap parameters of
     ``parameters``) and what to run for values to quote; at a corrected level, what it still
     leaves out. ``parameters``: per parametrisation its parameter names (default both
     parametrisations, every parameter); ``marked``: whether some values carry a caveat
-    (marked ``*``); ``ran``: the gap parametrisation's
-    :func:`~itr_identify.reporting.level.level_record` (what corrected its models), where
-    there is one."""
+    (marked ``*``); ``gap``: the gap parametrisation's identification, where there is one
+    (at the shipped level, :func:`~itr_identify.reporting.level.level_record` says what
+    corrected its models)."""
     s = settings
     name = fidelity_name(s.faithful)
     if parameters is None:
@@ -262,6 +262,7 @@ def fidelity_note(settings, parameters: Mapping[str, object] | None = None,
         prov = ShippedCorrections.load().provenance
         boxes = ", ".join(f"{f} {b:g} um" for f, b in prov["boxes_um"].items())
         voxels = " and ".join(f"{v:g}" for v in prov["voxels_um"])
+        ran = level_record(gap) if gap is not None else None
         models = dict(ran["models"]) if ran else {}
         runtime = [f for f, r in models.items() if r["source"] == "runtime"]
         if not models:
@@ -308,7 +309,7 @@ def headline(idents: Mapping[str, Identification]) -> dict:
             "fidelity": fidelity,
             "fidelity_note": fidelity_note(
                 s, {p: tuple(i.posterior.names) for p, i in idents.items()}, marked,
-                level_record(idents["gap"]) if "gap" in idents else None),
+                idents.get("gap")),
             "holds_at": f"{s.box_um:g} um box, {s.voxel_um:g} um voxels"
                         + ("" if s.faithful is None else
                            ", corrected to converged boxes by the shipped corrections"
