@@ -69,11 +69,13 @@ def measure_reproduce() -> dict:
 
 
 def measure_tests() -> dict:
-    wall, _, proc = _child([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider"],
-                           ROOT)
-    tail = proc.stdout.strip().splitlines()[-1] if proc.stdout.strip() else ""
+    wall, _, proc = _child([sys.executable, "-m", "pytest", "-q", "-p", "no:cacheprovider",
+                            "--durations=25"], ROOT)
+    lines = proc.stdout.strip().splitlines()
+    tail = lines[-1] if lines else ""
     counts = {k: int(v) for v, k in re.findall(r"(\d+) (passed|failed|skipped|errors?)", tail)}
-    return {"wall_s": round(wall, 1), "summary": tail, **counts}
+    slowest = [ln for ln in lines if re.match(r"\d+\.\d+s (call|setup|teardown)", ln)]
+    return {"wall_s": round(wall, 1), "summary": tail, **counts, "slowest": slowest}
 
 
 def _machine() -> str:
