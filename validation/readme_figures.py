@@ -22,6 +22,7 @@ import shutil
 import subprocess
 import sys
 import tempfile
+import textwrap
 import time
 from datetime import date
 from pathlib import Path
@@ -114,7 +115,8 @@ def write(data: dict) -> None:
         raise SystemExit(f"README.md has no {BEGIN} ... {END} block")
     head, rest = text.split(BEGIN, 1)
     _, tail = rest.split(END, 1)
-    README.write_text(f"{head}{BEGIN}\n{block(data)}\n{END}{tail}")
+    wrapped = "\n".join(textwrap.wrap(block(data), width=100, break_on_hyphens=False))
+    README.write_text(f"{head}{BEGIN}\n{wrapped}\n{END}{tail}")
 
 
 def main() -> None:
