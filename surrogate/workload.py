@@ -171,10 +171,6 @@ class Workload:
     def largest(self) -> Grid:
         return max(self.grids, key=lambda g: (g.solve_bytes(self.solver), g.voxels))
 
-    @property
-    def solves(self) -> int:
-        return sum(g.solves for g in self.grids)
-
     def peak_bytes(self) -> int:
         """Peak of the command's process, bytes: the interpreter and libraries
         (:data:`PROCESS_BASE_BYTES`), the solve on the largest grid, the discrete problems it

@@ -14,6 +14,7 @@ and solves them at both voxels, once per correction round (counted at two rounds
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from dataclasses import replace
 
 from itr_surrogate.workload import Grid, Workload, expected_particles
 
@@ -91,7 +92,6 @@ def tables_workload(settings, compositions: Mapping[str, Mapping[str, float]], *
     per_voxel = 0 if fa is None else fa.packings
     faithful = _faithful_grids(fw, compositions, solves_per_voxel=per_voxel)
     cheap = solves - sum(g.solves for g in faithful)
-    grid = _cheap_grid(fw, compositions, len(compositions), 0, basis_solves=0)
-    grid = Grid(grid.label, grid.box_um, grid.voxel_um, rves=grid.rves, solves=cheap,
-                particles=grid.particles)
+    grid = replace(_cheap_grid(fw, compositions, len(compositions), 0, basis_solves=0),
+                   solves=cheap)
     return Workload((grid, *faithful), fw.solver, workers, scheduler)
