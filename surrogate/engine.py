@@ -54,6 +54,7 @@ import pyarrow.parquet as pq
 from itr_fv.discrete.problem import DiscreteProblem
 from itr_fv.io import atomic_path, counted
 from itr_fv.materials import Materials
+from itr_fv.rve.contact_film import ContactFilm
 from itr_fv.rve.microstructure import Microstructure
 from itr_fv.solvers.choice import (
     DEFAULT_SOLVER,
@@ -92,6 +93,8 @@ class RVEData:
         Voxels per axis.
     matrix : str
         Matrix phase.
+    contact : ContactFilm
+        Which pairs touch and the film they meet at.
     """
 
     centers_m: np.ndarray
@@ -100,6 +103,7 @@ class RVEData:
     box_m: float
     shape: tuple[int, int, int]
     matrix: str
+    contact: ContactFilm = ContactFilm()
 
     @classmethod
     def of(cls, ms: Microstructure) -> RVEData:
@@ -111,7 +115,8 @@ class RVEData:
         box = float(np.asarray(ms.box_m, dtype=np.float64).ravel()[0])
         return cls(np.asarray(table.centers_m, dtype=np.float64),
                    np.asarray(table.radii_m, dtype=np.float64),
-                   tuple(str(m) for m in table.material), box, tuple(ms.shape), ms.names[0])
+                   tuple(str(m) for m in table.material), box, tuple(ms.shape), ms.names[0],
+                   table.contact)
 
     @property
     def rve_id(self) -> str:
@@ -119,7 +124,7 @@ class RVEData:
         cached = self.__dict__.get("_id")
         if cached is None:
             cached = rve_id(self.centers_m, self.radii_m, list(self.materials), self.shape,
-                            self.box_m / self.shape[0])
+                            self.box_m / self.shape[0], self.contact)
             object.__setattr__(self, "_id", cached)
         return cached
 
@@ -127,18 +132,20 @@ class RVEData:
         """The voxel image (the same voxels as the packing that produced the data)."""
         return Microstructure.from_spheres(self.centers_m, self.radii_m, list(self.materials),
                                            box_m=self.box_m, shape=self.shape,
-                                           matrix=self.matrix)
+                                           matrix=self.matrix, contact=self.contact)
 
     def to_payload(self) -> dict:
         return {"centers_m": self.centers_m.tolist(), "radii_m": self.radii_m.tolist(),
                 "materials": list(self.materials), "box_m": self.box_m,
-                "shape": list(self.shape), "matrix": self.matrix}
+                "shape": list(self.shape), "matrix": self.matrix,
+                "contact": self.contact.to_dict()}
 
     @classmethod
     def from_payload(cls, d: Mapping[str, Any]) -> RVEData:
         return cls(np.asarray(d["centers_m"], dtype=np.float64).reshape(-1, 3),
                    np.asarray(d["radii_m"], dtype=np.float64), tuple(d["materials"]),
-                   float(d["box_m"]), tuple(int(n) for n in d["shape"]), str(d["matrix"]))
+                   float(d["box_m"]), tuple(int(n) for n in d["shape"]), str(d["matrix"]),
+                   ContactFilm.from_dict(d.get("contact")))
 
 
 @dataclass(frozen=True)

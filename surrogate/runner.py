@@ -86,13 +86,15 @@ def run_task(campaign: dict, task: dict) -> dict:
     task = Task(**{**task, "set_indices": tuple(task["set_indices"])})
     ms, seed = campaign_rve(camp, task.formulation, task.replica)
     table = ms.particles
-    rid = rve_id(table.centers_m, table.radii_m, list(table.material), ms.shape, ms.voxel_m)
+    rid = rve_id(table.centers_m, table.radii_m, list(table.material), ms.shape, ms.voxel_m,
+                 table.contact)
     rve = {"rid": rid, "centers_m": np.asarray(table.centers_m, dtype=np.float64),
            "radii_m": np.asarray(table.radii_m, dtype=np.float64),
            "materials": [str(m) for m in table.material],
            "meta": {"formulation": task.formulation, "replica": task.replica,
                     "seed": seed, "box_um": camp.box_um, "voxel_um": camp.voxel_um,
-                    "shape": list(ms.shape), "matrix": camp.matrix}}
+                    "shape": list(ms.shape), "matrix": camp.matrix,
+                    "contact": table.contact.to_dict()}}
     problem = DiscreteProblem(ms, contact=camp.contact)
     backend = _backend(camp)
     sets = camp.parameter_sets(camp.formulation(task.formulation))

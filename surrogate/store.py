@@ -49,8 +49,10 @@ def tensor_of(row: dict) -> np.ndarray:
 
 
 def rve_id(centers_m: np.ndarray, radii_m: np.ndarray, materials: list[str],
-           shape: tuple[int, int, int], voxel_m: float) -> str:
-    """Hash of a particle table and its voxel grid (16 hex digits): the RVE's identity."""
+           shape: tuple[int, int, int], voxel_m: float, contact=None) -> str:
+    """Hash of a particle table, its voxel grid and its contact film (a
+    :class:`~itr_fv.rve.contact_film.ContactFilm`, None: the default), 16 hex digits: the
+    RVE's identity."""
     import hashlib
 
     h = hashlib.sha256()
@@ -59,6 +61,8 @@ def rve_id(centers_m: np.ndarray, radii_m: np.ndarray, materials: list[str],
     h.update("\0".join(materials).encode())
     h.update(np.asarray(shape, dtype="<i8").tobytes())
     h.update(np.float64(voxel_m).astype("<f8").tobytes())
+    if contact is not None:
+        h.update(np.asarray(contact.args, dtype="<f8").tobytes())
     return h.hexdigest()[:16]
 
 

@@ -146,7 +146,7 @@ def remove_particles(ms: Microstructure, keep: np.ndarray) -> Microstructure:
     t = ms.particles
     return Microstructure.from_spheres(t.centers_m[keep], t.radii_m[keep],
                                        list(np.asarray(t.material)[keep]), ms.box_m,
-                                       ms.shape, matrix=MATRIX)
+                                       ms.shape, matrix=MATRIX, contact=t.contact)
 
 
 def with_voids(ms: Microstructure, fraction: float, seed: int, radius_um: float = 0.4
@@ -177,7 +177,7 @@ def with_voids(ms: Microstructure, fraction: float, seed: int, radius_um: float 
     c = np.vstack([t.centers_m, placed])
     radii = np.concatenate([t.radii_m, np.full(n, r)])
     return Microstructure.from_spheres(c, radii, list(t.material) + ["air"] * n, box,
-                                       ms.shape, matrix=MATRIX)
+                                       ms.shape, matrix=MATRIX, contact=t.contact)
 
 
 def truth_rve(case: str, comp: dict[str, float], size: Size, seed: int

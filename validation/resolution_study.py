@@ -94,7 +94,7 @@ def solve(model: str, seed: int, h: float) -> dict:
     t = ms0.particles
     n = int(round(BOX_UM / h))
     ms = Microstructure.from_spheres(t.centers_m, t.radii_m, t.material, box_m=BOX_UM * 1e-6,
-                                     shape=n, matrix="silicone")
+                                     shape=n, matrix="silicone", contact=t.contact)
     mat = materials(model)
     t0 = time.perf_counter()
     problem = DiscreteProblem(ms, contact=mat.contact, interface=interface(model))

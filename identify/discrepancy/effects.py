@@ -164,7 +164,8 @@ class FillerFraction(Effect):
         box = np.array(base.material_ids.shape) * base.voxel_m
         return Microstructure.from_spheres(t.centers_m[keep], t.radii_m[keep],
                                            list(np.asarray(t.material)[keep]), box,
-                                           base.material_ids.shape, matrix=base.names[0])
+                                           base.material_ids.shape, matrix=base.names[0],
+                                           contact=t.contact)
 
 
 @dataclass(frozen=True)

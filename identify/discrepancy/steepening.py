@@ -318,7 +318,8 @@ class Agglomeration(_Repacking, Effect):
         keep[order[:n]] = False
         return Microstructure.from_spheres(t.centers_m[keep], t.radii_m[keep],
                                            list(np.asarray(t.material)[keep]), box,
-                                           crowded.shape, matrix=base.names[0])
+                                           crowded.shape, matrix=base.names[0],
+                                           contact=t.contact)
 
 
 @dataclass(frozen=True)

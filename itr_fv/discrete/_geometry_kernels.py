@@ -43,12 +43,16 @@ import numba as nb
 import numpy as np
 
 from ..numba_cache import njit
+from ..rve.contact_film import clearance
 
 __all__ = ["SERIAL_BELOW", "threads_for", "using_threads", "current_threads", "chunk_ranges",
            "cost_ranges", "zone_cells", "parallel_map", "interface_faces", "sphere_faces",
            "zone_fill", "zone_segment_faces", "first_segments", "parallel_copy"]
 
 _SER = dict(fastmath=False, nogil=True)
+
+#: :func:`itr_fv.rve.contact_film.clearance`, compiled: the stated film of touching pairs.
+_clearance = njit(**_SER)(clearance)
 
 #: Grids with fewer voxels than this are built single-threaded by default.
 SERIAL_BELOW = 40 ** 3
@@ -257,7 +261,7 @@ def _face_centre(p, d, n2, n3, h, x):  # pragma: no cover - compiled
 
 @njit(**_SER)
 def _sphere_faces(f0, f1, c0, c1, idx, p_lo, p_hi, cont, d, n2, n3, h, centers, radii, box,
-                  s, film, gap, shift):  # pragma: no cover - compiled
+                  rule, s, film, gap, shift):  # pragma: no cover - compiled
     """Staircase factors of faces f0..f1-1 and films of contact faces ``cont[c0:c1]`` of
     :func:`sphere_faces`, written into its output arrays."""
     x = np.empty(3)
@@ -300,6 +304,7 @@ def _sphere_faces(f0, f1, c0, c1, idx, p_lo, p_hi, cont, d, n2, n3, h, centers, 
         rho2 = max((w0 * w0 + w1 * w1 + w2 * w2) - along * along, 0.0)
         ra = radii[a]
         rb = radii[b]
+        dist -= _clearance(dist - ra - rb, ra, rb, rule[0], rule[1], rule[2])
         g0 = dist - ra - rb
         fi = (dist - math.sqrt(max(ra * ra - rho2, 0.0))
               - math.sqrt(max(rb * rb - rho2, 0.0)))
@@ -312,7 +317,8 @@ def _sphere_faces(f0, f1, c0, c1, idx, p_lo, p_hi, cont, d, n2, n3, h, centers, 
 
 def sphere_faces(idx: np.ndarray, p_lo: np.ndarray, p_hi: np.ndarray, d: int,
                  shape: tuple[int, int, int], h: float, centers: np.ndarray,
-                 radii: np.ndarray, staircase: bool, threads: int = 1
+                 radii: np.ndarray, staircase: bool, threads: int = 1,
+                 rule: tuple[float, float, float] = (0.0, 0.0, 0.0)
                  ) -> tuple[np.ndarray, ...]:
     """Contact faces, staircase factors, films, closest gaps and image shifts.
 
@@ -340,6 +346,8 @@ def sphere_faces(idx: np.ndarray, p_lo: np.ndarray, p_hi: np.ndarray, d: int,
         Compute the staircase factors.
     threads : int
         Threads (ranges of faces and of contact faces).
+    rule : tuple of float
+        ``ContactFilm.args`` of the table: touching pairs meet at the stated film.
 
     Returns
     -------
@@ -359,7 +367,8 @@ def sphere_faces(idx: np.ndarray, p_lo: np.ndarray, p_hi: np.ndarray, d: int,
         if staircase else []
     tasks += [(0, 0, c0, c1) for c0, c1 in chunk_ranges(at.size, threads, FACE_WORK)]
     parallel_map(lambda t: _sphere_faces(t[0], t[1], t[2], t[3], idx, p_lo, p_hi, at, d,
-                                         shape[1], shape[2], h, centers, radii, box, s, film,
+                                         shape[1], shape[2], h, centers, radii, box,
+                                         np.asarray(rule, dtype=np.float64), s, film,
                                          gap, shift), tasks, threads)
     return contact, s, film, at, gap, shift
 

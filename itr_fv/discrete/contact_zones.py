@@ -202,12 +202,18 @@ def zone_table(ms: Microstructure, thickness_m: float, margin_voxels: float) -> 
     shape, h = ms.shape, ms.voxel_m
     c = np.mod(table.centers_m, np.array(shape, dtype=np.float64) * h)
     r = table.radii_m
+    rule = table.contact
     kept = []
-    for a, b, D in near_contacts(ms, thickness_m):
+    for a, b, D in near_contacts(ms, thickness_m + rule.reach_m(float(r.max()))):
         dist = float(np.sqrt(D @ D))  # as contact_zones computes it (BLAS), per contact
-        if dist - r[a] - r[b] >= thickness_m or dist <= 0.0:
+        if dist <= 0.0:
             continue
-        kept.append((a, b, D, dist))
+        moved = dist - float(rule.clearance(dist - r[a] - r[b], r[a], r[b]))
+        if moved - r[a] - r[b] >= thickness_m:
+            continue
+        # a touching pair meets at the stated film: the image of b moves along the line
+        D = D * (moved / dist)
+        kept.append((a, b, D, moved))
     a = np.array([k[0] for k in kept], dtype=np.int64)
     b = np.array([k[1] for k in kept], dtype=np.int64)
     D = np.array([k[2] for k in kept], dtype=np.float64).reshape(-1, 3)
@@ -269,11 +275,12 @@ def contact_films(table, p_lo: np.ndarray, p_hi: np.ndarray, x_face: np.ndarray,
     shift = np.rint((D - (table.centers_m[b] - table.centers_m[a])) / box).astype(np.int64)
     dist = np.sqrt((D * D).sum(axis=1))
     u = D / dist[:, None]
+    ra = table.radii_m[a]
+    rb = table.radii_m[b]
+    dist = dist - table.contact.clearance(dist - ra - rb, ra, rb)
     w = x_face - ca
     along = (w * u).sum(axis=1)
     rho2 = np.maximum((w * w).sum(axis=1) - along * along, 0.0)
-    ra = table.radii_m[a]
-    rb = table.radii_m[b]
     gap0 = dist - ra - rb
     film = (dist - np.sqrt(np.maximum(ra * ra - rho2, 0.0))
             - np.sqrt(np.maximum(rb * rb - rho2, 0.0)))

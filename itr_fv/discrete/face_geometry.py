@@ -359,7 +359,8 @@ def _face_geometry(ms: Microstructure, staircase: bool, image_smoothing: float,
         hi.append(m_hi)
         if table is not None:
             is_contact, s, film, at, gap, shift = K.sphere_faces(
-                idx, p_lo, p_hi, d, shape, float(h), centers, radii, mode == "spheres", threads)
+                idx, p_lo, p_hi, d, shape, float(h), centers, radii, mode == "spheres", threads,
+                table.contact.args)
             pair_rows.append(np.column_stack([np.minimum(p_lo[at], p_hi[at]).astype(np.int64),
                                               np.maximum(p_lo[at], p_hi[at]).astype(np.int64),
                                               shift]))

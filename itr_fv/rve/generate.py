@@ -58,6 +58,7 @@ from ..materials.psd import (
     fit_truncated_sample,
     phi_rcp_lognormal,
 )
+from .contact_film import ContactFilm
 from .microstructure import Microstructure, grid_slabs, label_counts
 from .packing import pack_spheres, pairs_within_gap
 from .spec import RVESpec, voxels_per_edge
@@ -490,9 +491,12 @@ def generate_rve(specs: Sequence[FillerSpec] | FillerSpec, box_um: float, voxel_
         Thinnest matrix film between two particles, um (>= 0): a physical parameter of the
         composite, the silicone film that separates touching particles. Under the gap contact
         model (``Materials(contact="gap")``) it is the film of every contact, whose
-        resistance ``2 R_b + d / k_m`` it enters. 0 (default) keeps the packer's numerical
-        gaps of about 1 nm, i.e. particles in contact through their two interface resistances
-        alone. The report's ``gap_counts`` gives the distribution of the gaps.
+        resistance ``2 R_b + d / k_m`` it enters: the pairs the packer leaves touching meet
+        at exactly this film, whatever their size (the particle table's
+        :class:`~itr_fv.rve.contact_film.ContactFilm`; the packer's clearance of
+        ``inflate/2 .. inflate`` times the radii is taken out of the contact geometry).
+        0 (default): particles in contact through their two interface resistances alone.
+        The report's ``gap_counts`` gives the distribution of the packed gaps.
     matrix : str
         Name of the matrix phase.
     materials : iterable of str or Materials, optional
@@ -636,9 +640,10 @@ def generate_rve(specs: Sequence[FillerSpec] | FillerSpec, box_um: float, voxel_
     t2 = time.perf_counter()
     mats = [specs[k].material for k in owner]
     with stage_bar("voxelizing", progress) as bar:
-        ms = Microstructure.from_spheres(centers * 1e-6, 0.5 * d_all * 1e-6, mats,
-                                         box_m=L * 1e-6, shape=nvox, matrix=matrix,
-                                         progress=bar)
+        ms = Microstructure.from_spheres(
+            centers * 1e-6, 0.5 * d_all * 1e-6, mats, box_m=L * 1e-6, shape=nvox,
+            matrix=matrix, contact=ContactFilm(film_m=gap * 1e-6, packing_gap_m=gap * 1e-6,
+                                               tolerance=float(inflate)), progress=bar)
     t_vox = time.perf_counter() - t2
     if not return_report:
         return ms

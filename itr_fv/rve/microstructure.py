@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import warnings
 from collections.abc import Callable, Sequence
@@ -10,6 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..checks import finite_number, phase_name
+from .contact_film import ContactFilm
 
 __all__ = ["Microstructure", "ParticleTable", "grid_slabs", "label_counts"]
 
@@ -48,11 +50,15 @@ class ParticleTable:
         Sphere radii, m.
     material : ndarray of str, shape (P,)
         Phase name of each sphere. Row ``i`` is particle id ``i + 1``.
+    contact : ContactFilm
+        Which pairs touch and the film they meet at (the packer's, from
+        :func:`itr_fv.rve.generate_rve`; default: no stated film, every gap as it lies).
     """
 
     centers_m: np.ndarray
     radii_m: np.ndarray
     material: np.ndarray
+    contact: ContactFilm = ContactFilm()
 
     def __len__(self) -> int:
         return int(self.radii_m.shape[0])
@@ -227,6 +233,7 @@ class Microstructure:
     def from_spheres(cls, centers_m: np.ndarray, radii_m: np.ndarray,
                      materials: Sequence[str] | str, box_m: float | Sequence[float],
                      shape: int | Sequence[int], matrix: str = "matrix", *,
+                     contact: ContactFilm | None = None,
                      progress: Callable[[float], object] | None = None) -> "Microstructure":
         """Voxelize periodic spheres (minimum image) on a grid of cubic voxels.
 
@@ -247,6 +254,9 @@ class Microstructure:
             Voxels per axis; ``box_m / shape`` must be the same h on every axis.
         matrix : str
             Name of the matrix phase.
+        contact : ContactFilm, optional
+            Which pairs touch and their stated film (default: none stated, every gap as it
+            lies).
         progress : callable, optional
             Called with the fraction of the spheres voxelized (rising to 1), a few hundred
             times at most; for a progress bar.
@@ -283,6 +293,10 @@ class Microstructure:
             if mats.shape != (c.shape[0],):
                 raise ValueError(f"materials: expected {c.shape[0]} names, got {mats.shape}")
         phase_name(matrix, "matrix")
+        if contact is None:
+            contact = ContactFilm()
+        elif not isinstance(contact, ContactFilm):
+            raise ValueError(f"contact: expected a ContactFilm, got {type(contact).__name__}")
         phase_names = [matrix]
         for m in mats:
             phase_name(m, "materials")
@@ -297,8 +311,26 @@ class Microstructure:
         mid = np.empty_like(pid)
         for rows in grid_slabs(pid.shape):
             mid[rows] = lut[pid[rows]]
-        table = ParticleTable(c, r, np.asarray(mats, dtype=str))
+        table = ParticleTable(c, r, np.asarray(mats, dtype=str), contact)
         return cls(mid, pid, h, tuple(phase_names), table)
+
+    def with_film(self, film_m: float) -> "Microstructure":
+        """The same voxels and spheres, touching pairs meeting at the film ``film_m`` (m).
+
+        The pairs that touch are the packer's (:attr:`ParticleTable.contact`); the voxel
+        arrays are shared, not copied.
+        """
+        if self.particles is None:
+            raise ValueError("film_m: a stated film needs the particle table (a "
+                             "Microstructure from from_spheres or generate_rve)")
+        v = finite_number(film_m, "film_m")
+        if v < 0:
+            raise ValueError(f"film_m: expected a film >= 0 (m), got {film_m!r}")
+        c = self.particles.contact
+        table = dataclasses.replace(self.particles, contact=ContactFilm(
+            film_m=v, packing_gap_m=c.packing_gap_m, tolerance=c.tolerance))
+        return type(self)(self.material_ids, self.particle_ids, self.voxel_m, self.names,
+                          table)
 
     # --------------------------------------------------------------- properties
     @property
