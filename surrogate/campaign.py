@@ -23,7 +23,10 @@ starts; an error names the key. The file::
     tol = 1e-6                     # relative residual of every solve
     block_size = 8                 # parameter sets per task (one RVE geometry per task)
     max_diameter_box_ratio = 0.45  # largest particle diameter / box
-    min_gap_um = 0.0               # thinnest matrix film between particles, um
+    min_gap_um = 0.0               # thinnest matrix film the packer keeps, um
+    film_um = 0.002                # optional: the film touching particles meet at, um
+                                   # (default min_gap_um; the same packing at any film)
+    tail_quantile = 1e-4           # optional: number quantile cut off each far size tail
     cut_voxel_um = 0.2             # optional: pack with this voxel's fine-tail cut (the
                                    # same particles as a campaign at 0.2 um, re-voxelized)
     threads_per_worker = 1         # solver threads in each worker
@@ -82,13 +85,14 @@ __all__ = ["Campaign", "Formulation", "Task", "CampaignError", "PAPER_BASE", "ne
 PAPER_BASE = paper_data.paper_parameters()
 
 _TOP_KEYS = {"name", "box_um", "voxel_um", "replicas", "seed", "contact", "solver", "tol",
-             "block_size", "max_diameter_box_ratio", "min_gap_um", "cut_voxel_um",
+             "block_size", "max_diameter_box_ratio", "min_gap_um", "film_um", "cut_voxel_um",
+             "tail_quantile",
              "threads_per_worker", "matrix", "base", "formulation", "design"}
 _DESIGN_KEYS = {"table4": {"kind"}, "grid": {"kind", "values"},
                 "space_filling": {"kind", "n", "seed", "bounds"}}
 #: The file's keys that make its :class:`~itr_fv.rve.spec.RVESpec`.
 _RVE_KEYS = ("box_um", "voxel_um", "seed", "max_diameter_box_ratio", "min_gap_um",
-             "cut_voxel_um")
+             "cut_voxel_um", "film_um", "tail_quantile")
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9.+-]*$")
 
 
@@ -190,8 +194,11 @@ class Campaign:
         d = asdict(self)
         del d["rve"]
         d.update({k: getattr(self.rve, k) for k in _RVE_KEYS})
-        if d["cut_voxel_um"] is None:   # unset: the forms (and fingerprints) of earlier runs
-            del d["cut_voxel_um"]
+        for optional in ("cut_voxel_um", "film_um"):
+            if d[optional] is None:  # unset: the forms (and fingerprints) of earlier runs
+                del d[optional]
+        if d["tail_quantile"] == RVESpec.tail_quantile:  # the default: as earlier runs wrote
+            del d["tail_quantile"]
         d["formulation"] = [{"name": f.name, "fractions": f.fractions,
                              "psd": {k: list(v) for k, v in f.psd.items()}}
                             for f in self.formulations]

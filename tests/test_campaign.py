@@ -186,8 +186,8 @@ def _set_fraction(d: dict, value: float) -> None:
 BAD = [
     (lambda d: d.update(bogus=1),
      ("unknown key 'bogus' (known: base, block_size, box_um, contact, cut_voxel_um, design, "
-      "formulation, matrix, max_diameter_box_ratio, min_gap_um, name, replicas, seed, solver, "
-      "threads_per_worker, tol, voxel_um)")),
+      "film_um, formulation, matrix, max_diameter_box_ratio, min_gap_um, name, replicas, "
+      "seed, solver, tail_quantile, threads_per_worker, tol, voxel_um)")),
     (lambda d: d.update(voxl_um=0.25),
      "unknown key 'voxl_um' (did you mean 'voxel_um'? known: base, block_size, box_um, "),
     (lambda d: d["formulation"][0].update(fraction={"Al2O3": 0.4}),

@@ -18,6 +18,8 @@ H200 before) to 1e-5.
 Usage (on the device, the package and its wheels installed)::
 
     python validation/faithful_solves_on_device.py --out $OUT --budget-s 540 [--queue hybrid]
+    python validation/faithful_solves_on_device.py --out $OUT --budget-s 500 --queue film \
+        --backend fft/portable       # issue 47: box study, contact films, tail cut
 
 Each store is ``$OUT/<kind>__<folder>`` and every task's rows are also dumped as
 ``$OUT/<kind>__<folder>.rows.json`` (the device returns two folder levels at most).
@@ -87,12 +89,19 @@ def pick_backend(out: Path) -> dict:
     ok = {name: r for name, r in rows.items() if "k_iso" in r and (
         ref is None or abs(r["k_iso"] / ref - 1) < 1e-5)}
     best = min(ok, key=lambda n: ok[n]["wall_s"])
-    pre, kern = best.split("/")
+    use_backend(best, out)
+    return {"variants": rows, "chosen": best}
+
+
+def use_backend(name: str, out: Path) -> None:
+    """Patch the ``gpu`` solver choice to ``PRECONDITIONER/KERNELS`` (this run only)."""
+    from itr_fv.solvers import choice
+
+    pre, kern = name.split("/")
     gpu = dataclasses.replace(choice.SOLVERS["gpu"],
                               options={"device": "cuda", "preconditioner": pre, "kernels": kern})
-    choice.SOLVERS = MappingProxyType({**choice.SOLVERS, "gpu": gpu})  # this run only
-    log(f"using {best}", out)
-    return {"variants": rows, "chosen": best}
+    choice.SOLVERS = MappingProxyType({**choice.SOLVERS, "gpu": gpu})
+    log(f"using {name}", out)
 
 
 def hybrid_queue(solver: str) -> list[tuple[str, object, object]]:
@@ -111,6 +120,59 @@ def hybrid_queue(solver: str) -> list[tuple[str, object, object]]:
                 (task,) = [t for t in camp.tasks()
                            if t.formulation == form and t.replica == replica]
                 items.append((fold, camp, task))
+    return items
+
+
+#: Issue 47's box study: boxes (um), packings per box, the packings' first seed.
+FILM_BOXES_UM = (64, 80, 96)
+FILM_PACKINGS = 6
+FILM_SEED = 201
+#: Issue 47's contact-film table at the converged box (nm).
+FILMS_NM = (0.0, 1.0, 2.0, 5.0)
+
+
+def film_queue(solver: str) -> list[tuple[str, object, object]]:
+    """Issue 47, with touching pairs at the stated film (0 nm unless said), 0.25 um voxels,
+    R = 3e-8 m^2 K/W at every filler-matrix interface, in priority order:
+
+    1. AlN-60 at 64, 80 and 96 um, 6 packings each (seeds 201..), packing by packing across
+       the boxes, so that a budget cut leaves whole packings at every box;
+    2. the contact-film table at the converged box: AlN-60 and Al2O3-30-AlN-30 at 64 um, the
+       first packing, films 0, 1, 2 and 5 nm (the same particles and voxels at every film);
+    3. the tail cut at a fixed box: AlN-60 at 80 um with the size distribution cut at number
+       quantiles 1e-3 and 1e-5 (the box study's 1e-4 between them), 3 packings each;
+    4. Al2O3-30-AlN-30 at 64, 80 and 96 um, 6 packings each.
+    """
+    from box_convergence_study import GROUPS
+
+    from itr_surrogate.campaign import Campaign
+
+    def campaign(group: str, box: int, name: str, **rve) -> Campaign:
+        g = GROUPS[group]
+        return Campaign.from_dict({
+            "name": name, "box_um": float(box), "voxel_um": 0.25, "seed": FILM_SEED,
+            "replicas": FILM_PACKINGS, "contact": "gap", "solver": solver, "tol": 1e-6,
+            "block_size": 1, "formulation": [{"name": g["formulation"]}],
+            "design": {"kind": "grid", "values": g["values"]}, **rve})
+
+    items: list[tuple[str, object, object]] = []
+
+    def boxes(group: str) -> None:
+        camps = [(f"box47/{group}-{b}um", campaign(group, b, f"box47-{group}-{b}"))
+                 for b in FILM_BOXES_UM]
+        for r in range(FILM_PACKINGS):
+            for fold, camp in camps:
+                items.append((fold, camp, camp.tasks()[r]))
+
+    boxes("AlN")
+    for group in ("AlN", "hybrid"):
+        for f in FILMS_NM:
+            camp = campaign(group, 64, f"film47-{group}-{f:g}nm", film_um=f / 1000)
+            items.append((f"film47/{group}-64um-{f:g}nm", camp, camp.tasks()[0]))
+    for q in (1e-3, 1e-5):
+        camp = campaign("AlN", 80, f"tail47-AlN-80-q{q:g}", tail_quantile=q)
+        items += [(f"tail47/AlN-80um-q{q:g}", camp, t) for t in camp.tasks()[:3]]
+    boxes("hybrid")
     return items
 
 
@@ -173,16 +235,21 @@ def main() -> int:
                     help="start no task after this many seconds")
     ap.add_argument("--solver", default="gpu")
     ap.add_argument("--skip-pick", action="store_true")
-    ap.add_argument("--queue", choices=("main", "hybrid"), default="main")
+    ap.add_argument("--queue", choices=("main", "hybrid", "film"), default="main")
+    ap.add_argument("--backend", default=None,
+                    help="PRECONDITIONER/KERNELS of the gpu choice without timing the "
+                         "variants (e.g. fft/portable, the one verified on an H200)")
     args = ap.parse_args()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     from itr_surrogate.runner import run_tasks_here
     from itr_surrogate.store import CampaignStore
 
-    if args.solver == "gpu" and not args.skip_pick:
+    if args.backend:
+        use_backend(args.backend, out)
+    elif args.solver == "gpu" and not args.skip_pick:
         (out / "backend_choice.json").write_text(json.dumps(pick_backend(out), indent=1))
-    items = (queue if args.queue == "main" else hybrid_queue)(args.solver)
+    items = {"main": queue, "hybrid": hybrid_queue, "film": film_queue}[args.queue](args.solver)
     log(f"{len(items)} tasks queued", out)
     opened: dict[str, CampaignStore] = {}
     done = 0

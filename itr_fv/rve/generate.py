@@ -470,7 +470,8 @@ def generate_rve(specs: Sequence[FillerSpec] | FillerSpec, box_um: float, voxel_
                  seed: int, min_gap_um: float = 0.0, matrix: str = "silicone", *,
                  materials: Iterable[str] | None = None, tail_quantile: float = 1e-4,
                  min_diameter_voxels: float = 2.0, max_diameter_box_ratio: float = 1.0 / 3.0,
-                 contact_gap_um: float | None = None, inflate: float = 1e-3,
+                 contact_gap_um: float | None = None, film_um: float | None = None,
+                 inflate: float = 1e-3,
                  max_iter: int = 400_000, sampling: str = "stratified",
                  return_report: bool = False, progress: bool = True
                  ) -> Microstructure | tuple[Microstructure, RVEReport]:
@@ -510,6 +511,9 @@ def generate_rve(specs: Sequence[FillerSpec] | FillerSpec, box_um: float, voxel_
         Largest particle diameter as a fraction of the box (default 1/3).
     contact_gap_um : float, optional
         Gap threshold for the coordination number, um (default ``voxel_um / 2``).
+    film_um : float, optional
+        The film touching particles meet at, um (default ``min_gap_um``); the packing does
+        not depend on it.
     inflate : float
         Relative safety margin of the packer's contact distance (see
         :func:`itr_fv.rve.packing.pack_spheres`).
@@ -560,6 +564,9 @@ def generate_rve(specs: Sequence[FillerSpec] | FillerSpec, box_um: float, voxel_
     gap = _num(min_gap_um, "min_gap_um")
     if gap < 0:
         raise ValueError(f"min_gap_um must be >= 0 um, got {min_gap_um!r}")
+    stated = gap if film_um is None else _num(film_um, "film_um")
+    if stated < 0:
+        raise ValueError(f"film_um must be >= 0 um, got {film_um!r}")
     if not isinstance(matrix, str) or not matrix:
         raise ValueError(f"matrix: expected a phase name, got {matrix!r}")
     _cut_arguments(tail_quantile, min_diameter_voxels, max_diameter_box_ratio)
@@ -642,7 +649,7 @@ def generate_rve(specs: Sequence[FillerSpec] | FillerSpec, box_um: float, voxel_
     with stage_bar("voxelizing", progress) as bar:
         ms = Microstructure.from_spheres(
             centers * 1e-6, 0.5 * d_all * 1e-6, mats, box_m=L * 1e-6, shape=nvox,
-            matrix=matrix, contact=ContactFilm(film_m=gap * 1e-6, packing_gap_m=gap * 1e-6,
+            matrix=matrix, contact=ContactFilm(film_m=stated * 1e-6, packing_gap_m=gap * 1e-6,
                                                tolerance=float(inflate)), progress=bar)
     t_vox = time.perf_counter() - t2
     if not return_report:
@@ -742,8 +749,8 @@ def build_rve(spec: RVESpec, fillers: Sequence[FillerSpec] | FillerSpec, replica
             if not warn_box_cut:
                 warnings.simplefilter("ignore", UserWarning)
             ms = generate_rve(fillers, box_um=spec.box_um, voxel_um=spec.voxel_um, seed=seed,
-                              min_gap_um=spec.min_gap_um, matrix=matrix,
-                              tail_quantile=spec.tail_quantile,
+                              min_gap_um=spec.min_gap_um, film_um=spec.film_um,
+                              matrix=matrix, tail_quantile=spec.tail_quantile,
                               max_diameter_box_ratio=spec.max_diameter_box_ratio,
                               min_diameter_voxels=spec.min_diameter_voxels,
                               progress=progress)

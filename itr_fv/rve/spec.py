@@ -100,9 +100,12 @@ class RVESpec:
     max_diameter_box_ratio : float
         Largest particle diameter / box edge, in (0, 0.5).
     min_gap_um : float
-        Thinnest matrix film between two particles, um (>= 0; 0 keeps the packer's
-        numerical gaps of about 1 nm). Under the gap contact model it is the film of every
-        contact.
+        Thinnest matrix film the packer keeps between two particles, um (>= 0). Under the
+        gap contact model it is the film of every contact unless ``film_um`` states another.
+    film_um : float, optional
+        The film touching particles meet at, um (>= 0; None: ``min_gap_um``). The packing
+        does not depend on it: specifications that differ only here hold the same particles
+        and voxels, with other contact films.
     tail_quantile : float
         Number-probability cut of each far tail of the size distribution, in (0, 0.05).
     seed : int
@@ -123,6 +126,7 @@ class RVESpec:
     tail_quantile: float = 1e-4
     seed: int = 1
     cut_voxel_um: float | None = None
+    film_um: float | None = None
 
     def __post_init__(self) -> None:
         voxels_per_edge(self.box_um, self.voxel_um)
@@ -136,6 +140,9 @@ class RVESpec:
             raise ValueError(f"tail_quantile: expected a value in (0, 0.05), got {q!r}")
         if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
             raise ValueError(f"seed: expected a whole number >= 0, got {self.seed!r}")
+        f = self.film_um
+        if f is not None and (not _is_number(f) or f < 0 or f > 1.0):
+            raise ValueError(f"film_um: expected a film in [0, 1] um or None, got {f!r}")
         c = self.cut_voxel_um
         if c is not None and (not _is_number(c) or not c > 0):
             raise ValueError(f"cut_voxel_um: expected a voxel edge > 0 um or None, got {c!r}")
@@ -146,6 +153,11 @@ class RVESpec:
         :attr:`cut_voxel_um` (default: of this voxel)."""
         cut = self.voxel_um if self.cut_voxel_um is None else self.cut_voxel_um
         return 2.0 * cut / self.voxel_um
+
+    @property
+    def contact_film_um(self) -> float:
+        """The film touching particles meet at, um (``film_um``, else ``min_gap_um``)."""
+        return self.min_gap_um if self.film_um is None else self.film_um
 
     @property
     def n(self) -> int:
@@ -169,10 +181,12 @@ class RVESpec:
 
     def to_dict(self) -> dict[str, Any]:
         """Plain JSON-able form; ``RVESpec.from_dict(spec.to_dict()) == spec``
-        (``cut_voxel_um`` only where set: the forms of earlier specifications stay)."""
+        (``cut_voxel_um`` and ``film_um`` only where set: the forms of earlier
+        specifications stay)."""
         d = asdict(self)
-        if d["cut_voxel_um"] is None:
-            del d["cut_voxel_um"]
+        for optional in ("cut_voxel_um", "film_um"):
+            if d[optional] is None:
+                del d[optional]
         return d
 
     @classmethod
