@@ -52,7 +52,7 @@ from ..forward.model import ForwardModel
 from .measurements import Measurements
 
 __all__ = ["Stage", "StageResult", "Posterior", "stages_of", "calibrate", "pooled_scatter",
-           "variance", "log_likelihood", "credible_interval", "UNIDENTIFIED_RATIO",
+           "variance", "residuals", "log_likelihood", "credible_interval", "UNIDENTIFIED_RATIO",
            "EDGE_FACTOR", "UNDETERMINED_DECADES", "DETERMINATIONS"]
 
 #: Depth (in log-likelihood) of the region that the second, refined grid covers.
@@ -221,6 +221,9 @@ class Posterior:
         identifiability, log-likelihood at the best point.
     prior : (float, float)
         The log-uniform prior's range, m^2 K/W.
+    model_form_sd : float
+        The relative model-form error the likelihood carried (0: none;
+        :mod:`itr_identify.inference.model_form`).
     """
 
     names: list[str]
@@ -228,6 +231,7 @@ class Posterior:
     best: dict[str, float]
     prior: tuple[float, float]
     stages: list[StageResult] = field(default_factory=list)
+    model_form_sd: float = 0.0
 
     def median(self, name: str) -> float:
         return float(10 ** np.median(self.samples[:, self.names.index(name)]))
@@ -326,12 +330,13 @@ def _grid(prior: tuple[float, float], n: int) -> np.ndarray:
 
 
 def _stage_loglike(models: Mapping[str, ForwardModel], stage: Stage, meas: Measurements,
-                   columns: dict[str, np.ndarray], scatter: float) -> np.ndarray:
+                   columns: dict[str, np.ndarray], scatter: float,
+                   model_form_sd: float = 0.0) -> np.ndarray:
     total = 0.0
     for f in stage.formulations:
         k, err = models[f].predict(columns)
         se = meas.standard_error(f)
-        v = variance(se, k, err, scatter, models[f].model_sd)
+        v = variance(se, k, err, scatter, models[f].model_sd, model_form_sd)
         total = total + log_likelihood(meas.mean(f) - k, v, se ** 2, meas.values[f].size)
     return total
 
@@ -353,11 +358,30 @@ def log_likelihood(residual: np.ndarray, v: np.ndarray, v_measured: float,
 
 
 def variance(standard_error: float, k: np.ndarray, err: np.ndarray, scatter: float,
-             model_sd: float = 0.0) -> np.ndarray:
+             model_sd: float = 0.0, model_form_sd: float = 0.0) -> np.ndarray:
     """Likelihood variance, (W/(m K))^2: replicate variance of the mean, RVE scatter, the
     model level's relative uncertainty ``model_sd`` (earlier stages' spread and faithful
-    correction, :attr:`ForwardModel.model_sd`) and the surrogate's error bound."""
-    return standard_error ** 2 + ((scatter * k) ** 2 + (model_sd * k) ** 2) + err ** 2
+    correction, :attr:`ForwardModel.model_sd`), the relative model-form error
+    ``model_form_sd`` (:mod:`itr_identify.inference.model_form`) and the surrogate's error
+    bound."""
+    rel2 = scatter ** 2 + model_sd ** 2 + model_form_sd ** 2
+    return standard_error ** 2 + rel2 * k ** 2 + err ** 2
+
+
+def residuals(models: Mapping[str, ForwardModel], measurements: Measurements,
+              values: Mapping[str, float], model_form_sd: float = 0.0
+              ) -> dict[str, tuple[float, float, float]]:
+    """Per formulation at the parameter ``values`` (m^2 K/W): measured mean, model k_iso and
+    likelihood variance (:func:`variance`), W/(m K) and (W/(m K))^2."""
+    out = {}
+    for stage in stages_of(models):
+        s = pooled_scatter([models[f] for f in stage.formulations])
+        for f in stage.formulations:
+            m = models[f]
+            k, err = m.predict({p: np.array([values[p]]) for p in m.parameters})
+            v = variance(measurements.standard_error(f), k, err, s, m.model_sd, model_form_sd)
+            out[f] = (measurements.mean(f), float(k[0]), float(v[0]))
+    return out
 
 
 def _identifiability(names: Sequence[str], log_samples: np.ndarray,
@@ -396,7 +420,7 @@ def _statement(post: "Posterior", names: Sequence[str], directions: Sequence[dic
 
 def calibrate(models: Mapping[str, ForwardModel], measurements: Measurements, *,
               grid_points: int = 121, carried_samples: int = 256, n_samples: int = 4000,
-              seed: int = 0) -> Posterior:
+              seed: int = 0, model_form_sd: float = 0.0) -> Posterior:
     """Posterior of the interface parameters of ``models`` given ``measurements``.
 
     Parameters
@@ -412,11 +436,17 @@ def calibrate(models: Mapping[str, ForwardModel], measurements: Measurements, *,
         Posterior samples kept (jittered uniformly inside their grid cell).
     seed : int
         Seed of the sampling.
+    model_form_sd : float
+        Relative model-form error added to every formulation's likelihood variance (>= 0;
+        :mod:`itr_identify.inference.model_form` chooses it).
 
     Returns
     -------
     Posterior
     """
+    if not (isinstance(model_form_sd, (int, float)) and 0 <= model_form_sd < 1):
+        raise ValueError(f"model_form_sd: expected a relative error in [0, 1), got "
+                         f"{model_form_sd!r}")
     if not models:
         raise ValueError("models: expected at least one formulation")
     for f in models:
@@ -440,7 +470,7 @@ def calibrate(models: Mapping[str, ForwardModel], measurements: Measurements, *,
                 system=tuple(stage.system), formulations=tuple(stage.formulations),
                 parameters=(), carried=tuple(stage.carried), rve_scatter=scatter,
                 log_likelihood_best=float(_stage_loglike(models, stage, measurements,
-                                                         at_best, scatter)[0]),
+                                                         at_best, scatter, model_form_sd)[0]),
                 identifiability={"system": "+".join(stage.system), "directions": [],
                                  "statement": "no parameter of its own: predicted from "
                                               "the earlier stages"}))
@@ -460,7 +490,7 @@ def calibrate(models: Mapping[str, ForwardModel], measurements: Measurements, *,
                 columns[p] = np.repeat(10 ** prev[:, j], G.shape[0])
             for j, p in enumerate(stage.new):
                 columns[p] = np.tile(10 ** G[:, j], prev.shape[0])
-            ll = _stage_loglike(models, stage, measurements, columns, scatter)
+            ll = _stage_loglike(models, stage, measurements, columns, scatter, model_form_sd)
             return G, ll.reshape(prev.shape[0], G.shape[0]), mesh[0].shape
 
         # a grid over the prior, then the same number of points over the region that holds
@@ -486,7 +516,8 @@ def calibrate(models: Mapping[str, ForwardModel], measurements: Measurements, *,
             # the best point: earlier stages' best values, this stage's grid
             line = {p: np.full(g, best[p]) for p in names}
             line.update({p: 10 ** G[:, j] for j, p in enumerate(stage.new)})
-            ll_best = _stage_loglike(models, stage, measurements, line, scatter)
+            ll_best = _stage_loglike(models, stage, measurements, line, scatter,
+                                     model_form_sd)
         else:
             # independent of the earlier stages: pair the rows as they come
             samples = np.hstack([samples, new_samples])
@@ -503,7 +534,7 @@ def calibrate(models: Mapping[str, ForwardModel], measurements: Measurements, *,
             identifiability={"system": "+".join(stage.system),
                              **_identifiability(stage.new, new_samples, prior)},
             axes_log10=tuple(np.array(a) for a in axes), density=marg / marg.sum()))
-    post = Posterior(names, samples, best, tuple(prior))
+    post = Posterior(names, samples, best, tuple(prior), model_form_sd=float(model_form_sd))
     # the statements judge each parameter by the posterior's own intervals and flags
     post.stages = [st if not st.parameters else dataclasses.replace(
         st, identifiability={**st.identifiability, **_statement(

@@ -32,6 +32,7 @@ from ..forward.model import PARAMETRISATIONS, ForwardModel, ForwardSettings
 from .calibrate import Posterior, calibrate
 from .formulations import fractions_of
 from .measurements import Measurements
+from .model_form import misfit_note, with_model_form
 from .screen import ScreenResult, hierarchical_screen
 
 __all__ = ["Identification", "identify", "CARRIED_DRAWS"]
@@ -52,6 +53,7 @@ class Identification:
     seconds: dict[str, float] = field(default_factory=dict)
     measurements: Measurements | None = None
     fidelity_rounds: list[dict] = field(default_factory=list)
+    fit: dict = field(default_factory=dict)
 
     @property
     def n_parameters(self) -> int:
@@ -59,18 +61,11 @@ class Identification:
 
     def residuals(self) -> dict[str, tuple[float, float, float]]:
         """Per formulation at the best values: (measured mean, model k_iso, likelihood
-        variance), W/(m K) and (W/(m K))^2."""
-        from .calibrate import pooled_scatter, stages_of, variance
+        variance with the posterior's model-form term), W/(m K) and (W/(m K))^2."""
+        from .calibrate import residuals
 
-        out = {}
-        for stage in stages_of(self.models):
-            s = pooled_scatter([self.models[f] for f in stage.formulations])
-            for f in stage.formulations:
-                m = self.models[f]
-                k, err = m.predict({p: np.array([self.posterior.best[p]]) for p in m.parameters})
-                v = variance(self.measurements.standard_error(f), k, err, s, m.model_sd)
-                out[f] = (self.measurements.mean(f), float(k[0]), float(v[0]))
-        return out
+        return residuals(self.models, self.measurements, self.posterior.best,
+                         self.posterior.model_form_sd)
 
     def held(self) -> dict[str, dict]:
         """Per two-filler formulation: the single-filler parameters it is held at
@@ -183,12 +178,14 @@ def identify(measurements: Measurements, parametrisation: str = "gap", *,
         post = _corrected(models, _runtime(models, multis, echo), measurements, post,
                           faithful, grid_points, seed, rounds, echo)
         seconds["two-filler faithful corrections"] = time.perf_counter() - t
+    post, fit = with_model_form(models, measurements, post, grid_points=grid_points, seed=seed)
+    echo(f"  {par.name}: {misfit_note(fit)}")
     t = time.perf_counter()
     echo(f"  {par.name}: the paper's screening (Eq. 4 on its grid)")
     screening = hierarchical_screen(models, measurements)
     seconds["screening"] = time.perf_counter() - t
     return Identification(parametrisation, settings, models, post, screening, seconds,
-                          measurements, rounds)
+                          measurements, rounds, fit)
 
 
 def _runtime(models: dict[str, ForwardModel], names: list[str], echo: Callable) -> list[str]:

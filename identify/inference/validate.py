@@ -22,6 +22,7 @@ from itr_fv.materials import paper_data
 from ..forward.model import ForwardModel
 from .calibrate import Posterior, calibrate
 from .measurements import Measurements
+from .model_form import with_model_form
 
 __all__ = ["validate", "leave_one_out", "posterior_prediction"]
 
@@ -76,7 +77,7 @@ def posterior_prediction(model: ForwardModel, posterior: Posterior, *,
     else:
         k, err = np.full(S, model.predict({})[0][0]), np.zeros(S)
     rng = np.random.default_rng(seed)
-    rel = math.hypot(model.rve_scatter, model.model_sd)
+    rel = math.hypot(model.rve_scatter, model.model_sd, posterior.model_form_sd)
     k = (k * (1 + rel * rng.standard_normal(S)) + err * rng.uniform(-1, 1, S)
          + standard_error * rng.standard_normal(S))
     a = (1 - level) / 2
@@ -86,7 +87,9 @@ def posterior_prediction(model: ForwardModel, posterior: Posterior, *,
 
 def leave_one_out(models: Mapping[str, ForwardModel], measurements: Measurements, *,
                   tick: Callable[[], None] | None = None, **calibrate_kw) -> list[dict]:
-    """Identify without each formulation in turn and predict it.
+    """Identify without each formulation in turn and predict it (the calibration of the
+    others carries a model-form error where their fit fails its chi-square test:
+    :func:`itr_identify.inference.model_form.with_model_form`).
 
     Returns per formulation: measured mean, held-out prediction of the measured mean
     (median, 90 % interval: :func:`posterior_prediction`),
@@ -96,7 +99,9 @@ def leave_one_out(models: Mapping[str, ForwardModel], measurements: Measurements
     rows = []
     for name, model in models.items():
         rest = {f: m for f, m in models.items() if f != name}
-        post = calibrate(rest, measurements.without(name), **calibrate_kw)
+        held_out = measurements.without(name)
+        post, _ = with_model_form(rest, held_out, calibrate(rest, held_out, **calibrate_kw),
+                                  **calibrate_kw)
         missing = [p for p in model.parameters if p not in post.names]
         if missing:
             rows.append({"formulation": name, "skipped": f"without it nothing identifies "

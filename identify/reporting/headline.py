@@ -15,9 +15,11 @@ report's identifiability statements),
   :data:`EDGE_FACTOR`), or spans more than :data:`UNDETERMINED_DECADES` decades;
 - ``bounded on one side``: the interval reaches one end of the prior;
 
-then ``voxel-specific``: a per-area contact resistance (``Rff``): determined, but a property
-of the voxel it was identified at (``validation/results/resolution_area.md``); ``determined``:
-none of these.
+then ``model misfit``: the data would determine it, but the fit fails its chi-square test
+(p below :data:`~itr_identify.inference.model_form.MISFIT_P`): its interval carries a
+model-form error (:mod:`itr_identify.inference.model_form`); ``voxel-specific``: a per-area
+contact resistance (``Rff``): determined, but a property of the voxel it was identified at
+(``validation/results/resolution_area.md``); ``determined``: none of these.
 
 Which parametrisation to quote: :func:`parametrisation_choice`, the one rule that the
 headline and the report's model-selection section (:func:`itr_identify.reporting.report.
@@ -39,6 +41,7 @@ from itr_fv.materials.parameters import parse_parameter
 
 from ..forward.fidelity import fidelity_name
 from ..inference.calibrate import EDGE_FACTOR, UNDETERMINED_DECADES
+from ..inference.model_form import MISFIT_P, is_misfit, misfit_note
 from ..inference.pipeline import Identification
 from .error_budget import error_budget
 from .level import level_record
@@ -52,7 +55,7 @@ __all__ = ["parameter_flag", "prior_ends", "choose_parametrisation", "parametris
 #: fidelity removes: their combined factor on a resistance is set against its interval.
 UNCORRECTED = ("voxel bias (not corrected)", "box effect beyond the box solved")
 FLAGS = ("at the prior's edge", "undetermined", "bounded on one side", "voxel-specific",
-         "determined")
+         "model misfit", "determined")
 #: BIC difference from which one parametrisation is called better supported (Kass and
 #: Raftery's "positive evidence").
 BIC_MARGIN = 2.0
@@ -77,10 +80,15 @@ def prior_ends(post, name: str) -> tuple[bool, bool]:
 
 
 def parameter_flag(ident: Identification, name: str) -> str:
-    """The flag of parameter ``name`` of ``ident`` (one of :data:`FLAGS`)."""
+    """The flag of parameter ``name`` of ``ident`` (one of :data:`FLAGS`): a value the data
+    would determine is ``model misfit`` where its model fails its chi-square test
+    (:mod:`itr_identify.inference.model_form`), never ``determined``."""
     flag = ident.posterior.determination(name)
-    if (flag == "determined" and parse_parameter(name)[0] == "Rff"
-            and ident.parametrisation == "area"):
+    if flag != "determined":
+        return flag
+    if is_misfit(ident.fit):
+        return FLAGS[4]
+    if parse_parameter(name)[0] == "Rff" and ident.parametrisation == "area":
         return FLAGS[3]
     return flag
 
@@ -298,6 +306,9 @@ def headline(idents: Mapping[str, Identification]) -> dict:
     params = {p: {n: {"best": i.posterior.best[n], "interval_90": list(i.posterior.interval(n)),
                       "flag": flags[p][n], "unit": "m^2 K/W"}
                   for n in i.posterior.names} for p, i in idents.items()}
+    for p, i in idents.items():
+        for n, without in i.fit.get("intervals_without", {}).items():
+            params[p][n]["interval_90_without_model_form"] = list(without)
     for p, ident in idents.items():
         for n, entry in error_budget(ident)["parameters"].items():
             if n in params[p]:
@@ -315,7 +326,10 @@ def headline(idents: Mapping[str, Identification]) -> dict:
                            ", corrected to converged boxes by the shipped corrections"
                            if s.faithful.shipped else
                            f", corrected on faithful RVEs ({fidelity})"),
-            "parameters": params}
+            "parameters": params,
+            "fit": {p: {k: i.fit[k] for k in ("chi2", "dof", "p", "misfit", "model_form_sd")
+                        if k in i.fit} | ({"note": misfit_note(i.fit)} if i.fit else {})
+                    for p, i in idents.items()}}
 
 
 def _legend(head: dict) -> str:
@@ -323,8 +337,10 @@ def _legend(head: dict) -> str:
     return (f"Flags: determined; bounded on one side (the 90 % interval reaches one end of "
             f"the prior: the data bound the value from one side only); undetermined (both "
             f"ends, or wider than {UNDETERMINED_DECADES:g} decades); at the prior's edge (the "
-            "best value is, and the interval reaches it); voxel-specific (a per-area contact "
-            "value, a property of the voxel)." + (f" {INTERVAL_FACTOR_NOTE}." if marked else ""))
+            "best value is, and the interval reaches it); model misfit (the fit fails its "
+            f"chi-square test, p < {MISFIT_P:g}: the interval carries a model-form error and "
+            "the value is not a determination); voxel-specific (a per-area contact value, a "
+            "property of the voxel)." + (f" {INTERVAL_FACTOR_NOTE}." if marked else ""))
 
 
 def headline_lines(head: dict, width: int = 100) -> list[str]:
@@ -342,8 +358,13 @@ def headline_lines(head: dict, width: int = 100) -> list[str]:
             lo, hi = e["interval_90"]
             lines.append(f"  {n} = {e['best']:.2e} m^2 K/W (90 % interval {lo:.2e} - "
                          f"{hi:.2e}; {e['flag']})")
+            if "interval_90_without_model_form" in e:
+                a, b = e["interval_90_without_model_form"]
+                lines.append(f"    without the model-form error: {a:.2e} - {b:.2e}")
             if "caveat" in e:
                 lines.append(f"    * {e['caveat']}")
+        if head.get("fit", {}).get(par, {}).get("note"):
+            lines += wrap("  " + head["fit"][par]["note"], subsequent_indent="    ")
     lines += wrap(f"quote {head['quote']}: {head['why']}.")
     lines += wrap(f"These hold at fidelity {head['fidelity']} ({head['holds_at']}); the "
                   "report's error budget gives what the RVE leaves out. " + _legend(head))
@@ -364,8 +385,15 @@ def headline_markdown(head: dict) -> list[str]:
             effect = "-" if c is None else f"x{c:.2f}" + (
                 f" *: beyond the interval's x/{e['interval_factor']:.2f}" if "caveat" in e
                 else "")
-            lines.append(f"| {name} | {n} | {e['best']:.2e} | {lo:.2e} - {hi:.2e} | "
+            without = e.get("interval_90_without_model_form")
+            shown = f"{lo:.2e} - {hi:.2e}" + (
+                "" if without is None else
+                f" (without the model-form error {without[0]:.2e} - {without[1]:.2e})")
+            lines.append(f"| {name} | {n} | {e['best']:.2e} | {shown} | "
                          f"{e['flag']} | {effect} |")
+    notes = [f"{par}: {f['note']}" for par, f in head.get("fit", {}).items() if f.get("note")]
+    if notes:
+        lines += [""] + [f"- {n}" for n in notes]
     lines += ["", f"Quote **{head['quote']}**: {head['why']}. These values hold at fidelity "
               f"`{head['fidelity']}` ({head['holds_at']}); the error budget below gives what "
               "the RVE leaves out. " + _legend(head)]
