@@ -195,9 +195,10 @@ def rve_arguments(p: argparse.ArgumentParser, *, box: str, voxel: str) -> None:
     p.add_argument("--seed", type=number(int, 0, None, lo_open=False), default=None,
                    help="packing seed of the first replica (default 1)")
     p.add_argument("--film-nm", type=number(float, 0, 100, lo_open=False, unit=" nm"),
-                   default=None, help="silicone film between touching particles, nm, a "
-                   "physical parameter of the packing (default 0: the packer's ~1 nm "
-                   "numerical gaps, particles in contact through their interfaces alone)")
+                   default=None, help="silicone film at which touching particles meet, nm, "
+                   "the same for every particle size (default 0: particles in contact "
+                   "through their two interface resistances alone); the packing does not "
+                   "change with it")
     p.add_argument("--psd-basis", choices=["number", "volume"], default=None,
                    help="weighting of Table 1's lognormals (default number: the paper's "
                    "reading; volume: a laser-diffraction analyser's default)")
@@ -211,7 +212,7 @@ def forward_settings(fw, args: argparse.Namespace):
     solver = solver_option(args, fw.solver) if hasattr(args, "solver") else None
     changes = {k: v for k, v in (("box_um", args.box_um), ("voxel_um", args.voxel_um),
                                  ("replicas", args.replicas), ("seed", args.seed),
-                                 ("min_gap_um", None if film is None else film / 1000),
+                                 ("film_um", None if film is None else film / 1000),
                                  ("psd_basis", getattr(args, "psd_basis", None)),
                                  ("solver", solver))
                if v is not None}

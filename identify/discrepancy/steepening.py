@@ -196,8 +196,9 @@ class FilmThinning(_Repacking, Effect):
     0.55)``, linear in the fraction and zero at and above ``phi_0`` =
     :attr:`squeezed_fraction` (:data:`DENSE_FRACTION`, 0.62: the densest packing the RVE
     reaches with every seed), with ``d55``, the film at 55 vol% in nm, the parameter (0.29
-    ``d55`` at 60 vol%, 0 at 62 and 65 vol%). Nominal 0: the packer's numerical gaps of
-    about 1 nm (particles in contact through their two interface resistances alone).
+    ``d55`` at 60 vol%, 0 at 62 and 65 vol%). Nominal 0: touching particles in contact
+    through their two interface resistances alone (the packer's clearance is not a film:
+    :mod:`itr_fv.rve.contact_film`).
 
     The RVE is packed again with ``min_gap_um = d(phi)`` (phi the formulation's filler
     fraction; it replaces the base specification's film, 0 by default): under the gap

@@ -125,11 +125,11 @@ def fidelity_statement(settings, fillers=None) -> str:
                 "parametrisation is not corrected: its contact values belong to the "
                 f"{s.voxel_um:g} um voxel and {s.box_um:g} um box. Neither carries the box "
                 "effect beyond the faithful box, a film at contacts (here "
-                f"{1000 * s.rve.min_gap_um:g} nm) or the basis of Table 1 (here "
+                f"{1000 * s.rve.contact_film_um:g} nm) or the basis of Table 1 (here "
                 f"{s.psd_basis}-weighted): the error budget below gives each.")
     return (f"The 90 % intervals hold at this fidelity only: {s.box_um:g} um box, "
             f"{s.voxel_um:g} um voxels, {s.replicas} packings per formulation, a "
-            f"{1000 * s.rve.min_gap_um:g} nm film at contacts, Table 1 read as "
+            f"{1000 * s.rve.contact_film_um:g} nm film at contacts, Table 1 read as "
             f"{s.psd_basis}-weighted. They carry the measurement noise, the RVE-to-RVE scatter "
             "and the surrogate's error bound; they do not carry the voxel bias "
             "(`validation/results/voxel_bias_law.md`), the box's cut of the coarse tail "
@@ -315,8 +315,8 @@ def settings_lines(idents: Mapping[str, Identification], extra: Mapping[str, obj
              + " of Table 1's distributions (replaced by smaller particles); conductivities "
              + conductivities_used(ident),
              f"- stated inputs: silicone film between touching particles "
-             f"{1000 * s.rve.min_gap_um:g} nm (`--film-nm`; 0 = the packer's ~1 nm numerical "
-             f"gaps), Table 1 read as {s.psd_basis}-weighted (`--psd-basis`)",
+             f"{1000 * s.rve.contact_film_um:g} nm (`--film-nm`; 0 = in contact through the "
+             f"two interface resistances alone, at every particle size), Table 1 read as {s.psd_basis}-weighted (`--psd-basis`)",
              f"- prior: log-uniform {s.prior_m2K_per_W[0]:g} - {s.prior_m2K_per_W[1]:g} "
              "m^2 K/W for every resistance; screening grid 1e-8 - 1e-5 (the paper's)",
              f"- reduced basis: relative bound gap {s.rb_tol:g}, at most {s.rb_max_solves} "

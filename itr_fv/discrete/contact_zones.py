@@ -27,8 +27,8 @@ __all__ = ["DEFAULT_TOUCH_GAP_M", "SEGMENT_ZONE_VOXELS", "ContactZone", "ZoneTab
            "fill_thin_films", "zone_segments"]
 
 #: Particle pairs whose closest surface gap is at most this touch (m): they carry contact
-#: spots. The packer leaves ~1 nm between touching particles; nearly touching pairs in a
-#: dense packing sit at 10-200 nm.
+#: spots. Touching particles meet at their stated film (:mod:`itr_fv.rve.contact_film`; 0
+#: by default); nearly touching pairs in a dense packing sit at 10-200 nm.
 DEFAULT_TOUCH_GAP_M = 5e-9
 
 #: Contact zones whose film is at most this many voxels get segment conductances.
