@@ -176,6 +176,38 @@ def film_queue(solver: str) -> list[tuple[str, object, object]]:
     return items
 
 
+def film2_queue(solver: str) -> list[tuple[str, object, object]]:
+    """Issue 47's second device run: the voxel order per system on the same particles
+    (AlN-60, then Al2O3-30-AlN-30, 40 um at 0.25, 0.2 and 0.16 um with the fine tail cut at
+    0.25 um's two voxels, 2 packings), packing by packing, with the tail cut of
+    :func:`film_queue` (AlN-60 at 80 um, quantiles 1e-3 and 1e-5) between the systems."""
+    from box_convergence_study import GROUPS
+
+    from itr_surrogate.campaign import Campaign
+
+    items: list[tuple[str, object, object]] = []
+
+    def order(group: str) -> None:
+        g = GROUPS[group]
+        camps = [(f"order47/{group}-40um-{v:g}um", Campaign.from_dict({
+            "name": f"order47-{group}-{v:g}", "box_um": 40.0, "voxel_um": v,
+            "cut_voxel_um": 0.25, "seed": FILM_SEED, "replicas": 2, "contact": "gap",
+            "solver": solver, "tol": 1e-6, "block_size": 1,
+            "formulation": [{"name": g["formulation"]}],
+            "design": {"kind": "grid", "values": g["values"]}}))
+            for v in (0.25, 0.2, 0.16)]
+        for r in range(2):
+            for fold, camp in camps:
+                items.append((fold, camp, camp.tasks()[r]))
+
+    order("AlN")
+    for fold, camp, task in film_queue(solver):
+        if fold.startswith("tail47/"):
+            items.append((fold, camp, task))
+    order("hybrid")
+    return items
+
+
 def queue(solver: str) -> list[tuple[str, object, list]]:
     """(store folder, campaign, tasks) in priority order, tasks interleaved across voxels."""
     from box_convergence_study import campaign_dict
@@ -235,7 +267,10 @@ def main() -> int:
                     help="start no task after this many seconds")
     ap.add_argument("--solver", default="gpu")
     ap.add_argument("--skip-pick", action="store_true")
-    ap.add_argument("--queue", choices=("main", "hybrid", "film"), default="main")
+    ap.add_argument("--queue", choices=("main", "hybrid", "film", "film2"), default="main")
+    ap.add_argument("--stores", default=None,
+                    help="where the campaign stores go (default --out); every task's rows "
+                         "also go to OUT/rows.json, one file (a device returns few files)")
     ap.add_argument("--backend", default=None,
                     help="PRECONDITIONER/KERNELS of the gpu choice without timing the "
                          "variants (e.g. fft/portable, the one verified on an H200)")
@@ -249,7 +284,10 @@ def main() -> int:
         use_backend(args.backend, out)
     elif args.solver == "gpu" and not args.skip_pick:
         (out / "backend_choice.json").write_text(json.dumps(pick_backend(out), indent=1))
-    items = {"main": queue, "hybrid": hybrid_queue, "film": film_queue}[args.queue](args.solver)
+    items = {"main": queue, "hybrid": hybrid_queue, "film": film_queue,
+             "film2": film2_queue}[args.queue](args.solver)
+    stores = Path(args.stores) if args.stores else out
+    all_rows: dict[str, list] = {}
     log(f"{len(items)} tasks queued", out)
     opened: dict[str, CampaignStore] = {}
     done = 0
@@ -260,7 +298,7 @@ def main() -> int:
         store = opened.get(fold)
         flat = fold.replace("/", "__")   # the device returns two folder levels at most
         if store is None:
-            store = CampaignStore(out / flat)
+            store = CampaignStore(stores / flat)
             store.check_for(camp)
             store.open_for(camp)
             opened[fold] = store
@@ -271,7 +309,11 @@ def main() -> int:
         solves, failed, _ = run_tasks_here(camp, store, [task])
         done += 1
         rows = store.results().to_pylist() if not failed else []
-        (out / f"{flat}.rows.json").write_text(json.dumps(rows, default=str))
+        if args.stores:
+            all_rows[flat] = rows
+            (out / "rows.json").write_text(json.dumps(all_rows, default=str))
+        else:
+            (out / f"{flat}.rows.json").write_text(json.dumps(rows, default=str))
         ks = [f"{r['k_iso']:.4f}" for r in rows if r["task_id"] == task.task_id]
         log(f"{fold} {task.task_id}: {solves} solves in {time.perf_counter() - t:.1f} s"
             f"{' FAILED' if failed else ''} k_iso {ks}", out)
