@@ -8,9 +8,10 @@ film alone. R = 3e-8 m^2 K/W at every filler-matrix interface; the paper's condu
 - The cheap RVE: the default of ``itr reproduce`` (12 um at 0.25 um, packings 1, 2, 3), on
   the campaign engine here (``validation/results/contact_film_runs``; a re-run resumes).
 - The converged box: AlN-60 and Al2O3-30-AlN-30 at 64 um, 0.25 um, one packing (seed 201),
-  from the device run of ``validation/faithful_solves_on_device.py --queue film``
-  (``validation/results/device_issue47/film47__*.rows.json``); formulations without a
-  device row are marked "not run".
+  from the device run of ``validation/faithful_solves_on_device.py --queue film`` on one
+  NVIDIA H200 (``validation/results/device_issue47/film47__*.rows.json``; "(log)": a row
+  that did not come back from the device, read from the run's log line to four decimals);
+  the other formulations were not run at the converged box ("not run").
 
 It also lists the clearance the packer leaves between touching pairs (which the contact
 geometry no longer reads as a film) in the cheap RVE and in a 64 um box.
@@ -26,6 +27,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import statistics
 import sys
 import warnings
@@ -90,13 +92,28 @@ def cheap_k(name: str, film_nm: float) -> list[float] | None:
     return [r["k_iso"] for r in sorted(rows, key=lambda r: r["replica"])]
 
 
-def device_k(name: str, film_nm: float) -> float | None:
+#: A solve's line in the device run's output (``faithful_solves_on_device.py``'s log).
+LOG_LINE = re.compile(r"\] (\S+) (\S+)__r(\d+)__b\d+: \d+ solves in [\d.]+ s k_iso "
+                      r"\['([\d.]+)'\]")
+
+
+def device_k(name: str, film_nm: float) -> tuple[float, str] | None:
+    """k_iso of the converged box and where it was read: the run's rows, or (rows that did
+    not come back from the device) its log line, to four decimals."""
     group = DEVICE_GROUP.get(name)
-    path = DEVICE / f"film47__{group}-64um-{film_nm:g}nm.rows.json"
-    if group is None or not path.exists():
+    if group is None:
         return None
-    rows = json.loads(path.read_text())
-    return float(rows[0]["k_iso"]) if rows else None
+    store = f"film47/{group}-64um-{film_nm:g}nm"
+    path = DEVICE / f"{store.replace('/', '__')}.rows.json"
+    if path.exists():
+        rows = json.loads(path.read_text())
+        return (float(rows[0]["k_iso"]), "rows") if rows else None
+    tail = DEVICE / "output_tail.txt"
+    for line in (tail.read_text().replace("\r", "\n").splitlines() if tail.exists() else []):
+        m = LOG_LINE.search(line)
+        if m and m.group(1) == store and m.group(2) == name and m.group(3) == "0":
+            return float(m.group(4)), "log"
+    return None
 
 
 def clearances() -> dict[str, dict[str, float]]:
@@ -156,9 +173,11 @@ def report() -> None:
         cells.append(f"{statistics.fmean(k5) / statistics.fmean(k0):.4f}"
                      if k0 and k5 else "-")
         for film in FILMS_NM:
-            k = device_k(name, film)
+            got = device_k(name, film)
+            k = None if got is None else got[0]
             row[f"box64_{film:g}nm"] = k
-            cells.append("not run" if k is None else f"{k:.4f}")
+            cells.append("not run" if got is None else
+                         f"{k:.4f}" + (" (log)" if got[1] == "log" else ""))
         b0, b5 = row.get("box64_0nm"), row.get("box64_5nm")
         cells.append(f"{b5 / b0:.4f}" if b0 and b5 else "-")
         data["rows"][name] = row

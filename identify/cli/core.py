@@ -327,8 +327,35 @@ def identification_arguments(p: argparse.ArgumentParser) -> None:
                    "at standard), quick (none: the 12 um RVE's level), standard (runtime "
                    "full solves on 24 um boxes at 0.2 and 0.25 um; 48 min for reproduce on 2 "
                    "cores), paper (40 um boxes at 0.1 and 0.125 um; hours)")
+    p.add_argument("--conductivity-sd", action="append", default=[], metavar="PHASE=SD",
+                   help="relative standard deviation of a phase's conductivity, "
+                   "marginalised in the intervals (defaults: silicone 0.10, Al2O3 0.15, AlN "
+                   "0.25; e.g. silicone=0.02 for a measured matrix, 0 to hold it at the "
+                   "paper's value); repeat per phase")
     engine_arguments(p)
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
+
+
+def conductivity_sds(args: argparse.Namespace) -> dict[str, float]:
+    """``--conductivity-sd PHASE=SD`` as {phase: sd}; a bad one is a CLIError naming the
+    flag."""
+    from ..inference.nuisance import DEFAULT_SD
+
+    out = {}
+    for item in getattr(args, "conductivity_sd", []) or []:
+        phase, _, value = item.partition("=")
+        if phase not in DEFAULT_SD:
+            raise CLIError(f"--conductivity-sd: unknown phase {phase!r} (known: "
+                           f"{', '.join(sorted(DEFAULT_SD))})", 2)
+        try:
+            sd = float(value)
+        except ValueError:
+            sd = math.nan
+        if not 0 <= sd <= 1:
+            raise CLIError(f"--conductivity-sd: expected PHASE=SD with a relative sd in "
+                           f"[0, 1], got {item!r}", 2)
+        out[phase] = sd
+    return out
 
 
 def reproduce_settings(args: argparse.Namespace):
@@ -339,4 +366,5 @@ def reproduce_settings(args: argparse.Namespace):
     fw = forward_settings(base.forward, args)
     pars = ("area", "gap") if args.parametrisation == "both" else (args.parametrisation,)
     return ReproduceSettings(forward=fw, parametrisations=pars,
-                             leave_one_out=not getattr(args, "no_leave_one_out", False))
+                             leave_one_out=not getattr(args, "no_leave_one_out", False),
+                             conductivity_sd=tuple(sorted(conductivity_sds(args).items())))

@@ -38,6 +38,8 @@ from typing import Any
 
 import numpy as np
 
+from itr_fv.rve.contact_film import CONTACT_GEOMETRY
+
 from .correction_plan import CorrectionPlan
 from .fidelity import (
     BIAS_ORDER,
@@ -221,6 +223,14 @@ def fit_system(points: list[dict], names: list[str]) -> dict[str, Any]:
             "max_residual": float(np.abs(resid).max())}
 
 
+#: The relative uncertainty a factor of a table built with the earlier contact geometry
+#: carries for it (:attr:`ShippedCorrections.stale_contacts`): the packer's clearance, read
+#: there as a film, lowers k_iso more in a converged box than in the cheap RVE (larger
+#: particles, larger clearance), so such a factor reads low, by 1-3 % for AlN-60 at
+#: R = 3e-8 (validation/results/box_study.md, "the contact geometry's share").
+STALE_CONTACTS_SD = 0.03
+
+
 def _commit() -> str:
     try:
         return subprocess.run(["git", "rev-parse", "HEAD"], capture_output=True, text=True,
@@ -252,6 +262,7 @@ def assemble(plan: CorrectionPlan, folder: str | Path, *,
             "voxels_um": list(plan.voxels_um), "packings": plan.packings,
             "seeds": [plan.seed + j for j in range(plan.packings)], "solver": plan.solver,
             "tol": plan.tol, "bias_order": BIAS_ORDER, "bias_order_se": BIAS_ORDER_SE,
+            "contacts": CONTACT_GEOMETRY,
             "cheap_rve": {**CHEAP_RVE.to_dict(), "replicas": CHEAP_REPLICAS,
                           "seeds": [CHEAP_RVE.seed + r for r in range(CHEAP_REPLICAS)],
                           "tol": CHEAP_TOL},
@@ -267,6 +278,7 @@ class ShippedFactor:
     fraction: float
     fit: dict[str, Any]
     own: tuple[dict, ...] = ()
+    stale_sd: float = 0.0
 
     def _columns(self, columns: Mapping[str, np.ndarray], n: int) -> tuple[list, np.ndarray]:
         """Per parameter log10(R / R0) clipped into the design's range, and the distance
@@ -312,7 +324,7 @@ class ShippedFactor:
             u = math.sqrt(interp ** 2 + f["packing_sd"] ** 2 + f["order_sd"] ** 2)
         c = np.broadcast_to(np.asarray(c, dtype=np.float64), (n,)).copy()
         extra = np.sqrt(np.sum((slopes[:, None] * beyond) ** 2, axis=0))
-        return c, np.hypot(u, extra / np.maximum(c, 1e-12))
+        return c, np.hypot(np.hypot(u, self.stale_sd), extra / np.maximum(c, 1e-12))
 
 
 def _local_fit(points: tuple[dict, ...], fit: Mapping[str, Any]) -> tuple[np.ndarray,
@@ -404,6 +416,13 @@ class ShippedCorrections:
         return dict(self.data["provenance"])
 
     @property
+    def stale_contacts(self) -> bool:
+        """Whether the table was built with another contact geometry than the model's
+        (before touching pairs met at the stated film: its solves read the packer's
+        clearance as a film, more of it in the converged boxes than in the cheap RVE)."""
+        return self.provenance.get("contacts") != CONTACT_GEOMETRY
+
+    @property
     def systems(self) -> dict[str, dict[str, Any]]:
         return dict(self.data["systems"])
 
@@ -425,7 +444,8 @@ class ShippedCorrections:
                                     for f in fillers))
                 n_grid = math.prod(1 + (s["R_range"][q][1] > s["R_range"][q][0])
                                    for q in s["parameters"])
-                return ShippedFactor(name, total, s, own if len(own) >= n_grid else ())
+                return ShippedFactor(name, total, s, own if len(own) >= n_grid else (),
+                                     STALE_CONTACTS_SD if self.stale_contacts else 0.0)
         return None
 
     def why_not(self, fractions: Mapping[str, float]) -> str:

@@ -224,6 +224,10 @@ class Posterior:
     model_form_sd : float
         The relative model-form error the likelihood carried (0: none;
         :mod:`itr_identify.inference.model_form`).
+    log_evidence : float
+        Log of the data's likelihood averaged over the prior, summed over the stages (a
+        stage with no parameter of its own: its likelihood at the best values); what
+        :mod:`itr_identify.inference.nuisance` weighs inputs by.
     """
 
     names: list[str]
@@ -232,6 +236,7 @@ class Posterior:
     prior: tuple[float, float]
     stages: list[StageResult] = field(default_factory=list)
     model_form_sd: float = 0.0
+    log_evidence: float = 0.0
 
     def median(self, name: str) -> float:
         return float(10 ** np.median(self.samples[:, self.names.index(name)]))
@@ -461,11 +466,14 @@ def calibrate(models: Mapping[str, ForwardModel], measurements: Measurements, *,
     samples = np.zeros((n_samples, 0))
     best: dict[str, float] = {}
     stages_out: list[StageResult] = []
+    log_evidence = 0.0
     for stage in stages_of(models):
         scatter = pooled_scatter([models[f] for f in stage.formulations])
         if not stage.new:
             # nothing new to identify: these formulations only test the earlier stages
             at_best = {p: np.array([best[p]]) for p in names}
+            log_evidence += float(_stage_loglike(models, stage, measurements, at_best, scatter,
+                                                 model_form_sd)[0])
             stages_out.append(StageResult(
                 system=tuple(stage.system), formulations=tuple(stage.formulations),
                 parameters=(), carried=tuple(stage.carried), rve_scatter=scatter,
@@ -497,6 +505,8 @@ def calibrate(models: Mapping[str, ForwardModel], measurements: Measurements, *,
         # the posterior (log-likelihood within REFINE_DEPTH of its maximum, one cell added)
         axes = [_grid(prior, grid_points)] * len(stage.new)
         G, ll, shape = evaluate(axes)
+        top = float(ll.max())
+        log_evidence += top + math.log(float(np.mean(np.exp(ll - top))))
         keep = (ll.max(axis=0) > ll.max() - REFINE_DEPTH)
         lo_p, hi_p = axes[0][0], axes[0][-1]
         step0 = axes[0][1] - axes[0][0]
@@ -534,7 +544,8 @@ def calibrate(models: Mapping[str, ForwardModel], measurements: Measurements, *,
             identifiability={"system": "+".join(stage.system),
                              **_identifiability(stage.new, new_samples, prior)},
             axes_log10=tuple(np.array(a) for a in axes), density=marg / marg.sum()))
-    post = Posterior(names, samples, best, tuple(prior), model_form_sd=float(model_form_sd))
+    post = Posterior(names, samples, best, tuple(prior), model_form_sd=float(model_form_sd),
+                     log_evidence=log_evidence)
     # the statements judge each parameter by the posterior's own intervals and flags
     post.stages = [st if not st.parameters else dataclasses.replace(
         st, identifiability={**st.identifiability, **_statement(

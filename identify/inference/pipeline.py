@@ -28,11 +28,12 @@ import numpy as np
 from itr_fv.io import counted
 from itr_surrogate.engine import SolveEngine
 
-from ..forward.model import PARAMETRISATIONS, ForwardModel, ForwardSettings
+from ..forward.model import MATRIX, PARAMETRISATIONS, ForwardModel, ForwardSettings
 from .calibrate import Posterior, calibrate
 from .formulations import fractions_of
 from .measurements import Measurements
 from .model_form import misfit_note, with_model_form
+from .nuisance import InputPrior, default_priors, elasticities, marginalise
 from .screen import ScreenResult, hierarchical_screen
 
 __all__ = ["Identification", "identify", "CARRIED_DRAWS"]
@@ -54,6 +55,7 @@ class Identification:
     measurements: Measurements | None = None
     fidelity_rounds: list[dict] = field(default_factory=list)
     fit: dict = field(default_factory=dict)
+    inputs: dict = field(default_factory=dict)
 
     @property
     def n_parameters(self) -> int:
@@ -89,7 +91,8 @@ def identify(measurements: Measurements, parametrisation: str = "gap", *,
              settings: ForwardSettings | None = None, grid_points: int = 121, seed: int = 0,
              reuse: Mapping[str, ForwardModel] | None = None, progress: bool = False,
              echo: Callable[[str], None] = print,
-             engine: SolveEngine | None = None) -> Identification:
+             engine: SolveEngine | None = None,
+             inputs: Mapping[str, InputPrior] | None = None) -> Identification:
     """Calibrate and screen the interface parameters of one parametrisation.
 
     Parameters
@@ -114,6 +117,10 @@ def identify(measurements: Measurements, parametrisation: str = "gap", *,
     engine : SolveEngine, optional
         Where every full solve runs and is kept (:mod:`itr_surrogate.engine`; default:
         this process, nothing kept).
+    inputs : mapping of name to InputPrior, optional
+        The conductivities to marginalise (:mod:`itr_identify.inference.nuisance`; default
+        its :func:`~itr_identify.inference.nuisance.default_priors` for the matrix and every
+        filler; ``{}`` or a zero sd holds an input at its nominal value).
     """
     if parametrisation not in PARAMETRISATIONS:
         raise ValueError(f"parametrisation: expected one of {sorted(PARAMETRISATIONS)}, got "
@@ -180,12 +187,26 @@ def identify(measurements: Measurements, parametrisation: str = "gap", *,
         seconds["two-filler faithful corrections"] = time.perf_counter() - t
     post, fit = with_model_form(models, measurements, post, grid_points=grid_points, seed=seed)
     echo(f"  {par.name}: {misfit_note(fit)}")
+    inputs_record: dict = {}
+    priors = default_priors(sorted({MATRIX, *(x for f in comps.values() for x in f)})) \
+        if inputs is None else dict(inputs)
+    priors = {n: p for n, p in priors.items() if p.rel_sd > 0}
+    if priors:
+        t = time.perf_counter()
+        echo(f"  {par.name}: conductivities marginalised ({', '.join(sorted(priors))}; "
+             "one full solve per filler and formulation for its elasticity)")
+        elastic = elasticities(models, post.best)
+        post, inputs_record = marginalise(models, measurements, post, priors,
+                                          elasticity=elastic, grid_points=grid_points,
+                                          seed=seed)
+        inputs_record["elasticity"] = elastic
+        seconds["conductivities marginalised"] = time.perf_counter() - t
     t = time.perf_counter()
     echo(f"  {par.name}: the paper's screening (Eq. 4 on its grid)")
     screening = hierarchical_screen(models, measurements)
     seconds["screening"] = time.perf_counter() - t
     return Identification(parametrisation, settings, models, post, screening, seconds,
-                          measurements, rounds, fit)
+                          measurements, rounds, fit, inputs_record)
 
 
 def _runtime(models: dict[str, ForwardModel], names: list[str], echo: Callable) -> list[str]:

@@ -42,6 +42,7 @@ from itr_fv.materials.parameters import parse_parameter
 from ..forward.fidelity import fidelity_name
 from ..inference.calibrate import EDGE_FACTOR, UNDETERMINED_DECADES
 from ..inference.model_form import MISFIT_P, is_misfit, misfit_note
+from ..inference.nuisance import narrowing
 from ..inference.pipeline import Identification
 from .error_budget import error_budget
 from .level import level_record
@@ -265,7 +266,7 @@ def fidelity_note(settings, parameters: Mapping[str, object] | None = None,
                 + " For values to quote, run again at the default `--fidelity shipped` (the "
                 "corrections shipped with the package, same cost) or `--fidelity standard`.")
     if s.faithful.shipped:
-        from ..forward.shipped import ShippedCorrections
+        from ..forward.shipped import STALE_CONTACTS_SD, ShippedCorrections
 
         prov = ShippedCorrections.load().provenance
         boxes = ", ".join(f"{f} {b:g} um" for f, b in prov["boxes_um"].items())
@@ -284,11 +285,18 @@ def fidelity_note(settings, parameters: Mapping[str, object] | None = None,
         else:
             rest = ("; every gap model took its shipped factor: no faithful solve ran in "
                     "this run.")
+        table = ShippedCorrections.load()
+        stale = (" These corrections were built before touching particles met at the stated "
+                 "film (their solves read the packer's clearance as a film, more of it in "
+                 "the converged boxes than in the cheap RVE): each factor carries "
+                 f"{100 * STALE_CONTACTS_SD:g} % more relative uncertainty for it until they "
+                 "are rebuilt (`itr corrections build examples/corrections.toml`)."
+                 if table.stale_contacts else "")
         return (f"Fidelity `{name}` (the default): the gap parametrisation's level is "
                 f"corrected by the corrections shipped with the package (converged boxes: "
                 f"{boxes}; voxel bias extrapolated from {voxels} um; {prov['packings']} "
                 f"packings; {prov['date']}, `itr corrections show`), their uncertainty in "
-                "the intervals" + rest + star + area)
+                "the intervals" + rest + stale + star + area)
     boxes = ", ".join(f"{f} {b:g} um" for f, b in s.faithful.boxes_um)
     return (f"Fidelity `{name}`: the gap parametrisation's level is corrected on faithful "
             f"RVEs (boxes {boxes}; voxel bias removed by Richardson over "
@@ -309,6 +317,12 @@ def headline(idents: Mapping[str, Identification]) -> dict:
     for p, i in idents.items():
         for n, without in i.fit.get("intervals_without", {}).items():
             params[p][n]["interval_90_without_model_form"] = list(without)
+        for n, rec in i.inputs.get("parameters", {}).items():
+            shares = {k: v for k, v in sorted(rec["shares"].items(), key=lambda kv: -kv[1])}
+            params[p][n].update(
+                interval_90_nominal_inputs=list(rec["interval_nominal"]),
+                variance_shares=shares,
+                narrow_first=narrowing(i.inputs, n)[0] if rec.get("if_known") else None)
     for p, ident in idents.items():
         for n, entry in error_budget(ident)["parameters"].items():
             if n in params[p]:
@@ -358,9 +372,19 @@ def headline_lines(head: dict, width: int = 100) -> list[str]:
             lo, hi = e["interval_90"]
             lines.append(f"  {n} = {e['best']:.2e} m^2 K/W (90 % interval {lo:.2e} - "
                          f"{hi:.2e}; {e['flag']})")
+            if "interval_90_nominal_inputs" in e:
+                a, b = e["interval_90_nominal_inputs"]
+                lines.append(f"    at the nominal conductivities: {a:.2e} - {b:.2e}")
             if "interval_90_without_model_form" in e:
                 a, b = e["interval_90_without_model_form"]
                 lines.append(f"    without the model-form error: {a:.2e} - {b:.2e}")
+            if e.get("variance_shares"):
+                lines.append("    variance shares: " + ", ".join(
+                    f"{k} {100 * v:.0f} %" for k, v in e["variance_shares"].items()))
+            if e.get("narrow_first"):
+                nf = e["narrow_first"]
+                lines.append(f"    narrows most: measuring {nf['input']} (interval "
+                             f"{nf['interval'][0]:.2e} - {nf['interval'][1]:.2e} if known)")
             if "caveat" in e:
                 lines.append(f"    * {e['caveat']}")
         if head.get("fit", {}).get(par, {}).get("note"):

@@ -26,7 +26,8 @@ from itr_fv.run_folder import begin_run, write_manifest
 from itr_surrogate.engine import SolveEngine
 
 from ..forward.fidelity import CHEAP_REPLICAS, CHEAP_RVE, CHEAP_TOL, faithful_for, fidelity_name
-from ..forward.model import ForwardSettings
+from ..forward.model import MATRIX, ForwardSettings
+from ..inference.formulations import fractions_of
 from ..inference.measurements import Measurements, read_measurements
 from ..inference.pipeline import Identification, identify
 from ..inference.validate import leave_one_out, validate
@@ -58,6 +59,18 @@ class ReproduceSettings:
     grid_points: int = 121
     seed: int = 0
     leave_one_out: bool = True
+    #: (phase, relative sd) of the conductivities marginalised, beside the defaults of
+    #: :data:`itr_identify.inference.nuisance.DEFAULT_SD` (0 holds one at nominal)
+    conductivity_sd: tuple[tuple[str, float], ...] = ()
+
+    def input_priors(self, phases) -> dict:
+        """The :class:`~itr_identify.inference.nuisance.InputPrior` of every phase of
+        ``phases``: the defaults, with :attr:`conductivity_sd` where given."""
+        from ..inference.nuisance import InputPrior, default_priors
+
+        given = dict(self.conductivity_sd)
+        return {n: InputPrior(n, p.nominal, given.get(p.phase, p.rel_sd))
+                for n, p in default_priors(sorted(phases)).items()}
 
     @classmethod
     def at_fidelity(cls, level: str) -> "ReproduceSettings":
@@ -161,9 +174,11 @@ def _identify_all(meas: Measurements, settings: ReproduceSettings, progress: boo
     for par in settings.parametrisations:
         echo(f"{par}: RVEs, reduced bases and RVE scatter of "
              f"{counted(len(meas.formulations), 'formulation')}")
+        phases = {MATRIX, *(f for name in meas.formulations for f in fractions_of(name))}
         idents[par] = identify(meas, par, settings=settings.forward,
                                grid_points=settings.grid_points, seed=settings.seed,
-                               progress=progress, echo=echo, engine=engine)
+                               progress=progress, echo=echo, engine=engine,
+                               inputs=settings.input_priors(phases))
         post = idents[par].posterior
         best = ", ".join(f"{n} {v:.2e} (90 % {post.interval(n)[0]:.2e} - "
                          f"{post.interval(n)[1]:.2e})" for n, v in post.best.items())

@@ -17,7 +17,11 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-__all__ = ["ContactFilm", "clearance"]
+__all__ = ["ContactFilm", "clearance", "CONTACT_GEOMETRY"]
+
+#: The contact geometry of this module, as results made with it record it (the shipped
+#: corrections' provenance): touching pairs at the stated film.
+CONTACT_GEOMETRY = "stated film"
 
 
 def clearance(gap0, r_a, r_b, packing_gap, tolerance, film):

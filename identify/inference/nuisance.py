@@ -1,0 +1,291 @@
+"""Inputs the forward model holds fixed, marginalised: the matrix and the filler
+conductivities.
+
+Every face conductance of the discrete model scales by ``lam`` when every conductivity does
+and every resistance is divided by it, so exactly
+
+    k_eff(lam k_m, lam k_f, R / lam) = lam k_eff(k_m, k_f, R),
+
+and a matrix conductivity ``lam k_m`` with filler conductivities ``mu_f k_f`` gives
+
+    k_eff(lam k_m, mu_f k_f, R) = lam k_eff(k_m, (mu_f / lam) k_f, lam R)
+                                ~= lam prod_f (mu_f / lam)^(s_f) k_model(lam R),
+
+``k_model`` the forward model at its nominal conductivities (reduced basis, replica factor,
+correction) and ``s_f = d ln k_eff / d ln k_f`` the formulation's elasticity to filler f's
+conductivity, measured by one full solve per filler (:func:`elasticities`: the first replica
+at the best values with ``k_f`` times 0.8). The ``lam R`` part is exact; the filler part is
+first order in ``ln(mu_f / lam)`` (s_f is 0.02 for AlN-60 and 0.12 for Al2O3-60 in the cheap
+RVE: the filler's conductivity matters little behind its interface resistance). No full
+solve is added per input value: the inputs enter through the models already built.
+
+Each input has a lognormal prior (:class:`InputPrior`: nominal value and relative standard
+deviation; :data:`DEFAULT_PRIORS` argued in ``docs/identification.md``). The posterior of
+the resistances with the inputs integrated out is a mixture over a Gauss-Hermite product
+grid of the inputs' log values (:data:`NODES` per input): each node a full calibration
+(:func:`~itr_identify.inference.calibrate.calibrate`, the same grid in R), weighted by its
+quadrature weight times its evidence (:attr:`Posterior.log_evidence`: how well the data
+like those input values). Samples of the marginal posterior are drawn from the nodes by
+weight; the best values stay the nominal node's (the interval is moved to hold them where
+needed, as every interval is). The variance of each log10 resistance splits into the part
+the data leave at fixed inputs (``measurements``) and one share per input (the weighted
+regression of the nodes' posterior means on the inputs' standardised log values).
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from itr_fv.materials import paper_data
+from itr_fv.materials.parameters import parse_parameter
+
+from ..forward.model import ForwardModel
+from .calibrate import Posterior, calibrate
+from .measurements import Measurements
+
+__all__ = ["InputPrior", "DEFAULT_PRIORS", "NODES", "ScaledModel", "elasticities",
+           "marginalise", "default_priors", "narrowing"]
+
+#: Gauss-Hermite nodes per input (the matrix first; a filler's conductivity, whose
+#: elasticity is small, takes :data:`FILLER_NODES`).
+NODES = 5
+FILLER_NODES = 3
+#: k_f of the elasticity's solve, relative to nominal.
+ELASTICITY_STEP = 0.8
+
+
+@dataclass(frozen=True)
+class InputPrior:
+    """A lognormal prior of one conductivity.
+
+    Attributes
+    ----------
+    name : str
+        Flat parameter name, ``k_<phase>``.
+    nominal : float
+        Median, W/(m K) (the value the forward models were built at unless stated).
+    rel_sd : float
+        Standard deviation of its natural log (>= 0; 0: held at nominal).
+    """
+
+    name: str
+    nominal: float
+    rel_sd: float
+
+    def __post_init__(self) -> None:
+        kind, _ = parse_parameter(self.name)
+        if kind != "k":
+            raise ValueError(f"name: expected a conductivity k_<phase>, got {self.name!r}")
+        if not (isinstance(self.nominal, (int, float)) and self.nominal > 0
+                and math.isfinite(self.nominal)):
+            raise ValueError(f"{self.name}: expected a conductivity > 0 W/(m K), got "
+                             f"{self.nominal!r}")
+        if not (isinstance(self.rel_sd, (int, float)) and 0 <= self.rel_sd <= 1):
+            raise ValueError(f"{self.name} sd: expected a relative standard deviation in "
+                             f"[0, 1], got {self.rel_sd!r}")
+
+    @property
+    def phase(self) -> str:
+        return parse_parameter(self.name)[1][0]
+
+
+#: Relative standard deviations of the default priors (see ``docs/identification.md``):
+#: an unmeasured neat silicone (0.15-0.22 W/(m K) for the cured PDMS grades of gap fillers:
+#: 10 %), alumina powder (polycrystalline 20-40 W/(m K): 15 %), aluminium nitride powder
+#: (140-285 W/(m K) by purity and oxygen content: 25 %).
+DEFAULT_SD = {"silicone": 0.10, "Al2O3": 0.15, "AlN": 0.25}
+
+
+def default_priors(phases: Sequence[str]) -> dict[str, InputPrior]:
+    """The default prior of every phase of ``phases`` at the paper's conductivities."""
+    k = paper_data.PAPER_CONDUCTIVITY
+    return {f"k_{p}": InputPrior(f"k_{p}", float(k[p]), DEFAULT_SD.get(p, 0.25))
+            for p in phases}
+
+
+DEFAULT_PRIORS = default_priors(["silicone", "Al2O3", "AlN"])
+
+
+class ScaledModel:
+    """A forward model at other conductivities (the module's scaling): what
+    :func:`~itr_identify.inference.calibrate.calibrate` reads of a model, the rest passed
+    through."""
+
+    def __init__(self, model: ForwardModel, lam: float, mu: Mapping[str, float],
+                 elasticity: Mapping[str, float]):
+        self.model = model
+        self.lam = float(lam)
+        f = self.lam
+        for filler in model.fractions:
+            f *= (float(mu.get(filler, 1.0)) / self.lam) ** float(elasticity.get(filler, 0.0))
+        self.factor = f
+
+    def __getattr__(self, name: str):
+        return getattr(self.model, name)
+
+    def predict(self, columns: Mapping[str, np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+        k, err = self.model.predict({p: np.asarray(v, dtype=float) * self.lam
+                                     for p, v in columns.items()})
+        return k * self.factor, err * self.factor
+
+
+def elasticities(models: Mapping[str, ForwardModel], values: Mapping[str, float]
+                 ) -> dict[str, dict[str, float]]:
+    """Per formulation and filler: d ln k_eff / d ln k_f at ``values`` (m^2 K/W), from full
+    solves of the first replica at nominal and with k_f times :data:`ELASTICITY_STEP`."""
+    k = paper_data.PAPER_CONDUCTIVITY
+    out = {}
+    for f, m in models.items():
+        own = {p: values[p] for p in m.parameters if p in values}
+        base = float(m.solve_first(own, purpose="conductivity elasticity").mean())
+        out[f] = {}
+        for filler in m.fractions:
+            scaled = {**own, f"k_{filler}": ELASTICITY_STEP * float(k[filler])}
+            low = float(m.solve_first(scaled, purpose="conductivity elasticity").mean())
+            out[f][filler] = math.log(low / base) / math.log(ELASTICITY_STEP)
+    return out
+
+
+def _nodes(priors: Sequence[InputPrior]) -> tuple[np.ndarray, np.ndarray]:
+    """Standardised nodes (J, inputs) and log weights (J,) of the product grid."""
+    axes, logw = [], []
+    for i, pr in enumerate(priors):
+        n = NODES if i == 0 else FILLER_NODES
+        if pr.rel_sd == 0:
+            n = 1
+        x, w = np.polynomial.hermite_e.hermegauss(n)
+        axes.append(x)
+        logw.append(np.log(w / w.sum()))
+    z = np.array(list(itertools.product(*axes))).reshape(-1, len(priors))
+    lw = np.array([sum(c) for c in itertools.product(*logw)]) if priors else np.zeros(1)
+    return z, lw
+
+
+def marginalise(models: Mapping[str, ForwardModel], measurements: Measurements,
+                nominal: Posterior, priors: Mapping[str, InputPrior], *,
+                elasticity: Mapping[str, Mapping[str, float]], matrix: str = "silicone",
+                n_samples: int = 4000, seed: int = 0, **calibrate_kw) -> tuple[Posterior, dict]:
+    """The posterior with the conductivities of ``priors`` integrated out.
+
+    Parameters
+    ----------
+    models, measurements
+        As for :func:`~itr_identify.inference.calibrate.calibrate`.
+    nominal : Posterior
+        The calibration at the nominal inputs (its ``model_form_sd`` is kept at every node).
+    priors : mapping of name to InputPrior
+        The inputs to integrate out (``k_<matrix>`` and ``k_<filler>``); their nominal values
+        must be those the models were built at.
+    elasticity : mapping
+        :func:`elasticities` of the models.
+    matrix : str
+        The matrix phase.
+
+    Returns
+    -------
+    (Posterior, dict)
+        The marginal posterior and a record: per input its prior, per parameter the
+        interval at nominal inputs, the marginal one and each input's share of the
+        variance of its log10 value (``shares``, summing to 1 with ``measurements``), and
+        the nodes' weights.
+    """
+    k0 = paper_data.PAPER_CONDUCTIVITY
+    order = sorted(priors, key=lambda n: (n != f"k_{matrix}", n))
+    prs = [priors[n] for n in order]
+    for pr in prs:
+        if not math.isclose(pr.nominal, float(k0[pr.phase]), rel_tol=1e-12):
+            raise ValueError(f"{pr.name}: the forward models were built at "
+                             f"{float(k0[pr.phase]):g} W/(m K); a prior centred elsewhere "
+                             f"({pr.nominal:g}) needs models built there")
+    z, logw = _nodes(prs)
+    posts, log_post_w = [], []
+    for row, lw in zip(z, logw):
+        value = {pr.name: pr.nominal * math.exp(pr.rel_sd * x) for pr, x in zip(prs, row)}
+        lam = value.get(f"k_{matrix}", k0[matrix]) / k0[matrix]
+        mu = {pr.phase: value[pr.name] / pr.nominal for pr in prs if pr.phase != matrix}
+        if np.all(row == 0):
+            post = nominal
+        else:
+            scaled = {f: ScaledModel(m, lam, mu, elasticity.get(f, {}))
+                      for f, m in models.items()}
+            post = calibrate(scaled, measurements, model_form_sd=nominal.model_form_sd,
+                             seed=seed, **calibrate_kw)
+        posts.append(post)
+        log_post_w.append(lw + post.log_evidence)
+    lpw = np.array(log_post_w)
+    w = np.exp(lpw - lpw.max())
+    w /= w.sum()
+    rng = np.random.default_rng(seed)
+    pick = rng.choice(len(posts), size=n_samples, p=w)
+    names = nominal.names
+    cols = [[p.names.index(n) for n in names] for p in posts]
+    samples = np.vstack([posts[j].samples[rng.integers(0, posts[j].samples.shape[0],
+                                                        int(np.sum(pick == j))), :][:, cols[j]]
+                         for j in range(len(posts)) if np.any(pick == j)])
+    marginal = Posterior(list(names), samples, dict(nominal.best), nominal.prior,
+                         stages=nominal.stages, model_form_sd=nominal.model_form_sd,
+                         log_evidence=float(lpw.max() + math.log(np.exp(lpw - lpw.max()).sum())))
+    record = {"inputs": {pr.name: {"nominal": pr.nominal, "rel_sd": pr.rel_sd} for pr in prs},
+              "nodes": len(posts), "parameters": {}}
+    input_names = [pr.name for pr in prs]
+    for n in names:
+        means = np.array([float(np.mean(p.samples[:, p.names.index(n)])) for p in posts])
+        within = np.array([float(np.var(p.samples[:, p.names.index(n)])) for p in posts])
+        total = float(np.sum(w * (within + (means - np.sum(w * means)) ** 2)))
+        shares = _shares(z, w, means, total, [pr.name for pr in prs])
+        shares["measurements"] = float(np.sum(w * within)) / total if total > 0 else 1.0
+        if_known = {name: _mixture_interval(posts, w * (z[:, i] == 0), n, nominal, seed)
+                    for i, name in enumerate(input_names)}
+        record["parameters"][n] = {"interval_nominal": list(nominal.interval(n)),
+                                   "interval_marginal": list(marginal.interval(n)),
+                                   "shares": shares, "if_known": if_known}
+    record["node_weights"] = w.tolist()
+    return marginal, record
+
+
+def _mixture_interval(posts: Sequence[Posterior], w: np.ndarray, name: str,
+                      nominal: Posterior, seed: int, n_samples: int = 4000) -> list[float]:
+    """The 90 % interval (m^2 K/W) of ``name`` over the nodes weighted ``w`` (an input known
+    exactly: only its nominal nodes, their weights renormalised)."""
+    w = w / w.sum()
+    rng = np.random.default_rng(seed + 1)
+    pick = rng.choice(len(posts), size=n_samples, p=w)
+    x = np.concatenate([posts[j].samples[rng.integers(0, posts[j].samples.shape[0],
+                                                       int(np.sum(pick == j))),
+                                         posts[j].names.index(name)]
+                        for j in range(len(posts)) if np.any(pick == j)])
+    post = Posterior([name], x[:, None], {name: nominal.best[name]}, nominal.prior)
+    return list(post.interval(name))
+
+
+def narrowing(record: Mapping, name: str) -> list[dict]:
+    """The inputs of a :func:`marginalise` record ranked by how much knowing each exactly
+    would narrow the 90 % interval of ``name``: ``input``, ``interval`` (m^2 K/W) and
+    ``factor`` (the interval's half-width as a factor, ``sqrt(hi / lo)``)."""
+    par = record["parameters"][name]
+    rows = [{"input": k, "interval": v, "factor": math.sqrt(v[1] / v[0])}
+            for k, v in par["if_known"].items()]
+    return sorted(rows, key=lambda r: r["factor"])
+
+
+def _shares(z: np.ndarray, w: np.ndarray, means: np.ndarray, total: float,
+            names: Sequence[str]) -> dict[str, float]:
+    """Each input's share of the variance ``total`` of a log10 parameter: the weighted
+    least-squares slopes of the nodes' means on the standardised inputs, times the inputs'
+    weighted variances (the between-node part the inputs explain, one term each)."""
+    if total <= 0 or z.shape[0] < 2:
+        return {n: 0.0 for n in names}
+    X = np.column_stack([np.ones(z.shape[0]), z])
+    sw = np.sqrt(w)
+    beta, *_ = np.linalg.lstsq(X * sw[:, None], means * sw, rcond=None)
+    out = {}
+    for i, n in enumerate(names):
+        zi = z[:, i]
+        var = float(np.sum(w * (zi - np.sum(w * zi)) ** 2))
+        out[n] = float(beta[i + 1] ** 2 * var / total)
+    return out
