@@ -72,7 +72,8 @@ def fit_record(models: Mapping[str, ForwardModel], measurements: Measurements,
     dof = max(len(terms) - len(post.names), 1)
     chi2 = float(sum((m - k) ** 2 / v for m, k, v in terms.values()))
     p = chi_square_p(chi2, dof)
-    return {"chi2": chi2, "dof": dof, "p": p, "misfit": p < MISFIT_P, "threshold_p": MISFIT_P}
+    return {"chi2": chi2, "dof": dof, "p": p, "misfit": p < MISFIT_P, "threshold_p": MISFIT_P,
+            "log_likelihood_best": post.log_likelihood_best()}
 
 
 def with_model_form(models: Mapping[str, ForwardModel], measurements: Measurements,

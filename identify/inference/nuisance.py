@@ -57,6 +57,9 @@ NODES = 5
 FILLER_NODES = 3
 #: k_f of the elasticity's solve, relative to nominal.
 ELASTICITY_STEP = 0.8
+#: Grid points per parameter of a node's calibration other than the nominal one (the
+#: mixture is a quadrature of the inputs; each node's own interval needs no finer grid).
+NODE_GRID_POINTS = 61
 
 
 @dataclass(frozen=True)
@@ -213,8 +216,10 @@ def marginalise(models: Mapping[str, ForwardModel], measurements: Measurements,
         else:
             scaled = {f: ScaledModel(m, lam, mu, elasticity.get(f, {}))
                       for f, m in models.items()}
+            kw = {**calibrate_kw, "grid_points": min(calibrate_kw.get("grid_points", 121),
+                                                     NODE_GRID_POINTS)}
             post = calibrate(scaled, measurements, model_form_sd=nominal.model_form_sd,
-                             seed=seed, **calibrate_kw)
+                             seed=seed, **kw)
         posts.append(post)
         log_post_w.append(lw + post.log_evidence)
     lpw = np.array(log_post_w)

@@ -29,6 +29,7 @@ from itr_fv.io import counted
 from itr_surrogate.engine import SolveEngine
 
 from ..forward.model import MATRIX, PARAMETRISATIONS, ForwardModel, ForwardSettings
+from .alone import fit_alone
 from .calibrate import Posterior, calibrate
 from .formulations import fractions_of
 from .measurements import Measurements
@@ -56,18 +57,20 @@ class Identification:
     fidelity_rounds: list[dict] = field(default_factory=list)
     fit: dict = field(default_factory=dict)
     inputs: dict = field(default_factory=dict)
+    alone: list[dict] = field(default_factory=list)
 
     @property
     def n_parameters(self) -> int:
         return len(self.posterior.names)
 
-    def residuals(self) -> dict[str, tuple[float, float, float]]:
+    def residuals(self, *, model_form: bool = False) -> dict[str, tuple[float, float, float]]:
         """Per formulation at the best values: (measured mean, model k_iso, likelihood
-        variance with the posterior's model-form term), W/(m K) and (W/(m K))^2."""
+        variance), W/(m K) and (W/(m K))^2; the variance without the model-form term
+        (the fit's test) unless ``model_form``."""
         from .calibrate import residuals
 
         return residuals(self.models, self.measurements, self.posterior.best,
-                         self.posterior.model_form_sd)
+                         self.posterior.model_form_sd if model_form else 0.0)
 
     def held(self) -> dict[str, dict]:
         """Per two-filler formulation: the single-filler parameters it is held at
@@ -77,13 +80,16 @@ class Identification:
                 for f, m in self.models.items() if m.fixed}
 
     def chi_square(self) -> float:
-        """Sum over formulations of (measured - model)^2 / variance at the best values."""
+        """Sum over formulations of (measured - model)^2 / variance at the best values,
+        the variance without the model-form term (the fit's test)."""
         return float(sum((m - k) ** 2 / v for m, k, v in self.residuals().values()))
 
     def bic(self) -> float:
-        """Bayesian information criterion: -2 ln L_best + P ln(n formulations)."""
-        return (-2 * self.posterior.log_likelihood_best()
-                + self.n_parameters * math.log(len(self.models)))
+        """Bayesian information criterion: -2 ln L_best + P ln(n formulations), the
+        likelihood without the model-form term (parametrisations compared on the same
+        stated errors)."""
+        ll = self.fit.get("log_likelihood_best", self.posterior.log_likelihood_best())
+        return -2 * ll + self.n_parameters * math.log(len(self.models))
 
 
 
@@ -201,12 +207,13 @@ def identify(measurements: Measurements, parametrisation: str = "gap", *,
                                           seed=seed)
         inputs_record["elasticity"] = elastic
         seconds["conductivities marginalised"] = time.perf_counter() - t
+    alone = fit_alone(models, measurements, grid_points=grid_points, seed=seed)
     t = time.perf_counter()
     echo(f"  {par.name}: the paper's screening (Eq. 4 on its grid)")
     screening = hierarchical_screen(models, measurements)
     seconds["screening"] = time.perf_counter() - t
     return Identification(parametrisation, settings, models, post, screening, seconds,
-                          measurements, rounds, fit, inputs_record)
+                          measurements, rounds, fit, inputs_record, alone)
 
 
 def _runtime(models: dict[str, ForwardModel], names: list[str], echo: Callable) -> list[str]:

@@ -345,6 +345,36 @@ def posterior_figure(ident: Identification, path: Path) -> Path:
     return _save(fig, path)
 
 
+def alone_figure(ident: Identification, path: Path) -> Path | None:
+    """Each single-filler formulation's resistance fitted alone (90 % interval) against its
+    filler fraction, with the joint fit's interval as a band; None where no formulation was
+    fitted alone."""
+    rows = ident.alone
+    if not rows:
+        return None
+    plt = _pyplot()
+    params = sorted({r["parameter"] for r in rows})
+    fig, axes = plt.subplots(1, len(params), figsize=(4.8 * len(params), 3.8), squeeze=False)
+    for ax, p in zip(axes[0], params):
+        mine = [r for r in rows if r["parameter"] == p]
+        x = np.array([100 * r["fraction"] for r in mine])
+        best = np.array([r["best"] for r in mine])
+        lo = np.array([r["interval_90"][0] for r in mine])
+        hi = np.array([r["interval_90"][1] for r in mine])
+        ax.errorbar(x, best, yerr=[best - lo, hi - best], fmt="o", capsize=4,
+                    label="each formulation alone (90 %)")
+        jlo, jhi = ident.posterior.interval(p)
+        ax.axhspan(jlo, jhi, color="C1", alpha=0.25, label="joint fit (90 %)")
+        ax.axhline(ident.posterior.best[p], color="C1", lw=1)
+        ax.set_yscale("log")
+        ax.set_xlabel("filler volume fraction (%)")
+        ax.set_ylabel(parameter_label(p))
+        ax.set_title(f"{ident.parametrisation}: {p}", fontsize=10)
+        ax.legend(fontsize=7, loc="best")
+    fig.tight_layout()
+    return _save(fig, path)
+
+
 def level_caption(k: float, level: Mapping[str, object] | None, name: str, *,
                   sep: str = "; ") -> str:
     """``k`` (W/(m K)) of one cheap RVE said as raw, with its value at the fidelity level

@@ -60,6 +60,7 @@ def identified_dict(ident: Identification) -> dict:
                                          .to_dict()} if r["source"] == "runtime" else {})}
                             for f, r in level["models"].items() if r["source"] != "none"},
             "error_budget": error_budget(ident),
+            "fit": ident.fit, "inputs": ident.inputs, "alone": ident.alone,
             "two_filler_held": ident.held(), "seconds": ident.seconds}
 
 
@@ -336,6 +337,30 @@ def settings_lines(idents: Mapping[str, Identification], extra: Mapping[str, obj
                          + f"; their k_iso spread over that posterior {min(spread):.1f}-"
                          f"{max(spread):.1f} % (in the likelihood)")
     lines += [f"- {k}: {v}" for k, v in extra.items()]
+    return lines
+
+
+def alone_lines(idents: Mapping[str, Identification]) -> list[str]:
+    """Each single-filler formulation fitted alone (:func:`~itr_identify.inference.alone.
+    fit_alone`) beside the joint fit: do the formulations agree?"""
+    lines = []
+    for par, ident in idents.items():
+        if not ident.alone:
+            continue
+        lines += ["", f"### Each formulation alone ({par})", "",
+                  "| formulation | parameter | best (m^2 K/W) | 90 % interval | inside the "
+                  "joint interval? |", "|---|---|---|---|---|"]
+        for r in ident.alone:
+            lo, hi = r["interval_90"]
+            jlo, jhi = ident.posterior.interval(r["parameter"])
+            overlap = "overlaps" if lo <= jhi and hi >= jlo else "no overlap"
+            lines.append(f"| {r['formulation']} | {r['parameter']} | {r['best']:.2e} | "
+                         f"{lo:.2e} - {hi:.2e} ({r['determination']}) | {overlap} |")
+    if lines:
+        lines = ["## Do the formulations agree?", "",
+                 "Each single-filler formulation calibrated on its own replicates "
+                 "(`fig_alone.png`); where the intervals do not overlap, the formulations "
+                 "disagree on the resistance and the model's form is in question."] + lines
     return lines
 
 

@@ -291,6 +291,8 @@ def _figures(idents: dict[str, Identification], validation: dict, out: Path
     files.append(figures.screening_figure(idents, out / "fig8_screening.png"))
     for par, ident in idents.items():
         files.append(figures.posterior_figure(ident, out / f"posterior_{par}.png"))
+    if "gap" in idents and idents["gap"].alone:
+        files.append(figures.alone_figure(idents["gap"], out / "fig_alone.png"))
     target = "Al2O3-60" if "Al2O3-60" in first.models else next(iter(first.models))
     files += _temperature_field(idents.get("gap", first), target, out)
     return files, fits
@@ -332,6 +334,7 @@ def _reproduce_markdown(head, idents, meas, validation, lofo, psd_fits, timing,
     lines += report.selection_lines(idents)
     lines += ["", "Residuals at the best values (reduced basis of replica 1):", ""]
     lines += report.residual_lines(idents)
+    lines += [""] + report.alone_lines(idents)
     lines += ["", "## Identifiability", ""]
     lines += report.identifiability_lines(idents)
     lines += ["", "## Table 6: validation with the full solver", ""]
