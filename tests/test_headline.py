@@ -257,3 +257,20 @@ def test_the_fidelity_caveat_is_said_once_with_its_notation_explained(no_budget)
     assert md.count("run again at the default `--fidelity shipped`") == 1
     assert "x/F is the 90 % interval's half-width" in md and "x1.95 *" in md
     assert "quote it from a higher --fidelity" not in text + md
+
+
+def test_models_at_different_fidelity_are_not_compared_by_their_bic():
+    """Issue 47: the BIC of a corrected gap model and of an uncorrected area model is not a
+    comparison of parametrisations; none is then supported, and the reason is said."""
+    bics = {"area": 10.0, "gap": 60.0}
+    flags = {"area": {"R_Al2O3_silicone": "undetermined"},
+             "gap": {"R_Al2O3_silicone": "model misfit"}}
+    same = choose_parametrisation(bics, flags)
+    assert same["supported"] == "area" and same["margin"] == 50.0
+    other = choose_parametrisation(bics, flags, levels={"area": "the cheap RVE",
+                                                        "gap": "fidelity shipped"})
+    assert other["supported"] is None and other["margin"] is None
+    assert other["why"].startswith("not compared by their BIC")
+    assert other["quote"] == "gap" and "quote the intervals" in other["why"]
+    flags["gap"]["R_Al2O3_silicone"] = "determined"
+    assert choose_parametrisation(bics, flags, levels={"area": "a", "gap": "b"})["quote"] == "gap"

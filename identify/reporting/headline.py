@@ -105,7 +105,8 @@ def chi_square_per_dof(ident: Identification) -> float:
 
 def choose_parametrisation(bics: Mapping[str, float], flags: Mapping[str, Mapping[str, str]],
                            chi2_dof: Mapping[str, float] | None = None,
-                           voxel_um: float | None = None) -> dict:
+                           voxel_um: float | None = None,
+                           levels: Mapping[str, str] | None = None) -> dict:
     """Which parametrisation the data support and which one to quote, and why: the one rule
     of the headline and of the report's model-selection section.
 
@@ -128,6 +129,9 @@ def choose_parametrisation(bics: Mapping[str, float], flags: Mapping[str, Mappin
         Chi-square per degree of freedom at the best values, per parametrisation.
     voxel_um : float, optional
         The voxel the values were identified at.
+    levels : mapping of str to str, optional
+        The fidelity level of each parametrisation's models: models at different levels are
+        not compared by their BIC (none is supported).
 
     Returns
     -------
@@ -156,8 +160,26 @@ def choose_parametrisation(bics: Mapping[str, float], flags: Mapping[str, Mappin
     lowest, other = order[0], order[1]
     margin = bics[other] - bics[lowest]
     supported = lowest if margin >= BIC_MARGIN else None
-    out.update(margin=margin, supported=supported)
+    compared = levels is None or len({levels[p] for p in order}) == 1
+    if not compared:
+        supported = None
+    out.update(margin=margin if compared else None, supported=supported)
     ok = [p for p in order if usable(p)]
+    if not compared:
+        at = ", ".join(f"{p} at {levels[p]}" for p in order)
+        if ok:
+            q = ok[0]
+            rest = [p for p in order if p != q]
+            return {**out, "quote": q, "agrees": True,
+                    "why": f"not compared by their BIC: their models sit at different "
+                           f"fidelity ({at}); {q} determines its filler-matrix resistances"
+                           + "".join(f"; {p} leaves {left(p)}" for p in rest if left(p))}
+        q = "gap" if "gap" in order else lowest
+        return {**out, "quote": q, "agrees": True,
+                "why": f"not compared by their BIC: their models sit at different fidelity "
+                       f"({at}); no parametrisation determines every filler-matrix "
+                       f"resistance ({q} leaves {left(q)}): quote the intervals, not the "
+                       "best values"}
     if supported is not None and usable(supported):
         return {**out, "quote": supported, "agrees": True,
                 "why": f"the data support it (BIC lower by {margin:.1f} than {other}) and its "
@@ -208,8 +230,18 @@ def parametrisation_choice(idents: Mapping[str, Identification],
                  for p, i in idents.items()}
     chi2 = {p: chi_square_per_dof(i) for p, i in idents.items()}
     voxel = next(iter(idents.values())).settings.voxel_um
+    levels = {p: level_name(i) for p, i in idents.items()}
     return {**choose_parametrisation({p: i.bic() for p, i in idents.items()}, flags, chi2,
-                                     voxel), "chi2_dof": chi2}
+                                     voxel, levels), "chi2_dof": chi2, "levels": levels}
+
+
+def level_name(ident: Identification) -> str:
+    """The fidelity level of an identification's models: that of its settings for the gap
+    parametrisation (the one the faithful corrections apply to), ``cheap RVE`` otherwise
+    and at ``quick``."""
+    if ident.parametrisation != "gap" or ident.settings.faithful is None:
+        return "the cheap RVE"
+    return f"fidelity {fidelity_name(ident.settings.faithful)}"
 
 
 def _caveat(budget_entry: dict) -> dict:
