@@ -29,7 +29,8 @@ like those input values). Samples of the marginal posterior are drawn from the n
 weight; the best values stay the nominal node's (the interval is moved to hold them where
 needed, as every interval is). The variance of each log10 resistance splits into the part
 the data leave at fixed inputs (``measurements``) and one share per input (the weighted
-regression of the nodes' posterior means on the inputs' standardised log values).
+regression of the nodes' posterior means on the inputs' standardised log values, scaled to
+sum to the between-node part: the shares and ``measurements`` sum to 1).
 """
 
 from __future__ import annotations
@@ -243,7 +244,11 @@ def marginalise(models: Mapping[str, ForwardModel], measurements: Measurements,
         within = np.array([float(np.var(p.samples[:, p.names.index(n)])) for p in posts])
         total = float(np.sum(w * (within + (means - np.sum(w * means)) ** 2)))
         shares = _shares(z, w, means, total, [pr.name for pr in prs])
-        shares["measurements"] = float(np.sum(w * within)) / total if total > 0 else 1.0
+        measured = float(np.sum(w * within)) / total if total > 0 else 1.0
+        explained = sum(shares.values())
+        if explained > 0:   # the inputs' part is the between-node variance: 1 - measured
+            shares = {k: v * (1.0 - measured) / explained for k, v in shares.items()}
+        shares["measurements"] = measured
         if_known = {name: _mixture_interval(posts, w * (z[:, i] == 0), n, nominal, seed)
                     for i, name in enumerate(input_names)}
         record["parameters"][n] = {"interval_nominal": list(nominal.interval(n)),

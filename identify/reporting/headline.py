@@ -450,6 +450,22 @@ def headline_markdown(head: dict) -> list[str]:
     notes = [f"{par}: {f['note']}" for par, f in head.get("fit", {}).items() if f.get("note")]
     if notes:
         lines += [""] + [f"- {n}" for n in notes]
+    inputs = [(par, n, e) for par, params in head["parameters"].items()
+              for n, e in params.items() if e.get("variance_shares")]
+    if inputs:
+        lines += ["", "The conductivities are marginalised (`itr_identify.inference.nuisance`): "
+                  "the interval at the paper's conductivities, each input's share of the "
+                  "variance of log10 of the value, and the input whose measurement would "
+                  "narrow the interval most:", "",
+                  "| parametrisation | parameter | at the nominal conductivities | shares | "
+                  "narrows most (interval if known) |", "|---|---|---|---|---|"]
+        for par, n, e in inputs:
+            a, b = e["interval_90_nominal_inputs"]
+            shares = ", ".join(f"{k} {100 * v:.0f} %" for k, v in e["variance_shares"].items())
+            nf = e.get("narrow_first")
+            narrow = "-" if not nf else (f"{nf['input']} ({nf['interval'][0]:.2e} - "
+                                         f"{nf['interval'][1]:.2e})")
+            lines.append(f"| {par} | {n} | {a:.2e} - {b:.2e} | {shares} | {narrow} |")
     lines += ["", f"Quote **{head['quote']}**: {head['why']}. These values hold at fidelity "
               f"`{head['fidelity']}` ({head['holds_at']}); the error budget below gives what "
               "the RVE leaves out. " + _legend(head)]
