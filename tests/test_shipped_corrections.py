@@ -197,6 +197,11 @@ def test_the_shipped_file_carries_its_provenance_and_every_system():
         assert 0.9 < p["c"] < 1.6 and math.isfinite(p["packing_sd"])
 
 
+@pytest.mark.xfail(ShippedCorrections.load().stale_contacts, strict=True,
+                   reason="issue 47: the shipped table was built before touching particles "
+                          "met at the stated film (its solves read the packer's clearance as a "
+                          "film); a regeneration with the current contacts differs until the "
+                          "table is rebuilt, and this test must pass again then")
 def test_one_shipped_point_regenerated_at_runtime_matches_within_its_scatter(tmp_path):
     """The CI-size regeneration: Al2O3-55 at R = 1e-8 (its 32 um box at 0.25 and 0.2 um, two
     packings, and the three cheap replicas), from the shipped plan file."""
@@ -317,3 +322,28 @@ def test_itr_corrections_show_of_no_corrections_table_is_one_line_naming_the_fil
     if content is not None and name != "hello.txt":
         with pytest.raises(ValueError, match=r"^data: not a corrections table \("):
             ShippedCorrections(json.loads(content))
+
+
+def test_a_table_from_the_earlier_contact_geometry_carries_its_doubt():
+    """Issue 47: a table whose provenance does not name the stated-film contacts gives each
+    factor 3 % more relative uncertainty; the same table marked current does not."""
+    import copy
+
+    import numpy as np
+
+    from itr_fv.rve.contact_film import CONTACT_GEOMETRY
+    from itr_identify.forward.shipped import STALE_CONTACTS_SD
+
+    old = ShippedCorrections.load()
+    data = copy.deepcopy(old.data)
+    data["provenance"].pop("contacts", None)
+    stale = ShippedCorrections(data)
+    data = copy.deepcopy(data)
+    data["provenance"]["contacts"] = CONTACT_GEOMETRY
+    current = ShippedCorrections(data)
+    assert stale.stale_contacts and not current.stale_contacts
+    col = {"R_AlN_silicone": np.array([3e-8])}
+    c1, u1 = stale.for_fractions({"AlN": 0.6}).factor(col, 1)
+    c0, u0 = current.for_fractions({"AlN": 0.6}).factor(col, 1)
+    assert c1[0] == c0[0]
+    assert u1[0] == pytest.approx(np.hypot(u0[0], STALE_CONTACTS_SD), rel=1e-12)

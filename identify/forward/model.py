@@ -559,9 +559,10 @@ class ForwardModel:
         return self.engine if self.engine is not None else _SERIAL
 
     def _request(self, replica: int, mat: Materials, *, purpose: str,
-                 fields: bool = False) -> SolveRequest:
+                 fields: bool = False, tol: float | None = None) -> SolveRequest:
         return SolveRequest.for_materials(
-            RVEData.of(self.microstructures[replica]), mat, self.settings.solver_tol,
+            RVEData.of(self.microstructures[replica]), mat,
+            self.settings.solver_tol if tol is None else tol,
             solver=self.settings.solver, fields=fields, purpose=purpose,
             formulation=self.formulation, replica=replica)
 
@@ -583,8 +584,9 @@ class ForwardModel:
         self.solves.extend(solve_row(q, res) for q, res in zip(requests, results))
         return results
 
-    def solve_first(self, values: Mapping[str, float], *, purpose: str) -> np.ndarray:
+    def solve_first(self, values: Mapping[str, float], *, purpose: str,
+                    tol: float | None = None) -> np.ndarray:
         """Full solve (3,) of the first replica at ``values`` (with :attr:`fixed`), recorded
-        in :attr:`solves`."""
-        request = self._request(0, self.materials(values), purpose=purpose)
+        in :attr:`solves`; ``tol``: the solver's relative residual (default the settings')."""
+        request = self._request(0, self.materials(values), purpose=purpose, tol=tol)
         return self._solve_recorded([request])[0].k_diagonal

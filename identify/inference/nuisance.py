@@ -58,6 +58,9 @@ NODES = 5
 FILLER_NODES = 3
 #: k_f of the elasticity's solve, relative to nominal.
 ELASTICITY_STEP = 0.8
+#: Relative residual of the elasticity's two solves: a difference quotient needs its solves
+#: far tighter than the difference (ln 0.8 s_f is a few 1e-3).
+ELASTICITY_TOL = 1e-11
 #: Grid points per parameter of a node's calibration other than the nominal one (the
 #: mixture is a quadrature of the inputs; each node's own interval needs no finer grid).
 NODE_GRID_POINTS = 61
@@ -141,16 +144,19 @@ class ScaledModel:
 def elasticities(models: Mapping[str, ForwardModel], values: Mapping[str, float]
                  ) -> dict[str, dict[str, float]]:
     """Per formulation and filler: d ln k_eff / d ln k_f at ``values`` (m^2 K/W), from full
-    solves of the first replica at nominal and with k_f times :data:`ELASTICITY_STEP`."""
+    solves of the first replica at nominal and with k_f times :data:`ELASTICITY_STEP`, both to
+    the relative residual :data:`ELASTICITY_TOL`."""
     k = paper_data.PAPER_CONDUCTIVITY
     out = {}
     for f, m in models.items():
         own = {p: values[p] for p in m.parameters if p in values}
-        base = float(m.solve_first(own, purpose="conductivity elasticity").mean())
+        base = float(m.solve_first(own, purpose="conductivity elasticity",
+                                   tol=ELASTICITY_TOL).mean())
         out[f] = {}
         for filler in m.fractions:
             scaled = {**own, f"k_{filler}": ELASTICITY_STEP * float(k[filler])}
-            low = float(m.solve_first(scaled, purpose="conductivity elasticity").mean())
+            low = float(m.solve_first(scaled, purpose="conductivity elasticity",
+                                      tol=ELASTICITY_TOL).mean())
             out[f][filler] = math.log(low / base) / math.log(ELASTICITY_STEP)
     return out
 
