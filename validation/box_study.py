@@ -180,7 +180,6 @@ def main() -> int:
                   f"interval of the next step ({100 * w['lo']:+.2f} to {100 * w['hi']:+.2f} %) "
                   "is what 6 packings resolve of it."]
     old = old_boxes()
-    film = json.loads((RESULTS / "contact_film.json").read_text())
     lines += ["", "## The contact geometry's share", "",
               "| box (um) | earlier geometry: packings, mean | stated film: mean | change |",
               "|---|---|---|---|"]

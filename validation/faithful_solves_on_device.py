@@ -56,7 +56,6 @@ def pick_backend(out: Path) -> dict:
 
     from itr_fft.array_api_backend import ArrayAPIBackend
     from itr_fv.discrete.problem import DiscreteProblem
-    from itr_fv.solvers import choice
     from itr_fv.solvers.driver import homogenize
     from itr_surrogate.campaign import Campaign
     from itr_surrogate.runner import campaign_rve
