@@ -505,8 +505,6 @@ def calibrate(models: Mapping[str, ForwardModel], measurements: Measurements, *,
         # the posterior (log-likelihood within REFINE_DEPTH of its maximum, one cell added)
         axes = [_grid(prior, grid_points)] * len(stage.new)
         G, ll, shape = evaluate(axes)
-        top = float(ll.max())
-        log_evidence += top + math.log(float(np.mean(np.exp(ll - top))))
         keep = (ll.max(axis=0) > ll.max() - REFINE_DEPTH)
         lo_p, hi_p = axes[0][0], axes[0][-1]
         step0 = axes[0][1] - axes[0][0]
@@ -515,6 +513,12 @@ def calibrate(models: Mapping[str, ForwardModel], measurements: Measurements, *,
                 for j in range(len(stage.new))]
         G, ll, shape = evaluate(axes)
         steps = np.array([a[1] - a[0] for a in axes])
+        # the prior's mass of the refined cells: the likelihood beyond them is below
+        # exp(-REFINE_DEPTH) of its peak (averaged over the carried samples)
+        top = float(ll.max())
+        width = math.log10(prior[1]) - math.log10(prior[0])
+        log_evidence += (top + math.log(float(np.exp(ll - top).sum(axis=1).mean()))
+                         + float(np.sum(np.log(steps / width))))
         S, g = ll.shape
         w = np.exp(ll - ll.max())
         pick = rng.choice(S * g, size=n_samples, p=(w / w.sum()).ravel())
