@@ -249,7 +249,13 @@ def test_default_identification_applies_the_shipped_corrections_and_agrees_with_
     assert lo <= 2.84e-8 <= hi
     budget = error_budget(ident)
     item = budget["formulations"]["Al2O3-60"]["items"]["correction uncertainty"]
-    assert item["in_likelihood"] and 0 < item["value"] < 0.02
+    # the table's own uncertainty, beside the 3 % a table of the earlier contact geometry
+    # carries for it (issue 47)
+    from itr_identify.forward.shipped import STALE_CONTACTS_SD
+
+    stale = STALE_CONTACTS_SD if ShippedCorrections.load().stale_contacts else 0.0
+    assert item["value"] >= stale
+    assert item["in_likelihood"] and 0 < math.sqrt(item["value"] ** 2 - stale ** 2) < 0.02
     assert "interpolation" in item["basis"]
     # what ran, said once: every model took its shipped factor, no faithful solve ran, and
     # the boxes named are the shipped table's (32 um for Al2O3), not the runtime fallback's

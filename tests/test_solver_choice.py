@@ -143,7 +143,10 @@ def test_demo_solves_with_the_chosen_solver(tmp_path, capsys):
 def test_reproduce_on_the_device_equals_the_cpu_run(gpus, monkeypatch, tmp_path):
     """``itr reproduce --device cuda`` end to end with a stand-in for the device: the device
     check sees one GPU and the ``gpu`` choice's backend is the array-API backend on NumPy
-    (the same code CuPy runs). Its identified.json equals the CPU run's to 1e-6 relative."""
+    (the same code CuPy runs). Its identified.json equals the CPU run's to 1e-6 relative,
+    except the error budget's surrogate-error entries: a reduced basis's a-posteriori error
+    bound, some 1e-5 of k since contacts meet at the stated film (issue 47), differs between
+    the two solvers' snapshots (tol 1e-8) by 2e-6 of itself; those are held to 1e-4."""
     import json
 
     from validation.bench_gpu import max_json_difference
@@ -160,6 +163,14 @@ def test_reproduce_on_the_device_equals_the_cpu_run(gpus, monkeypatch, tmp_path)
     cpu = json.loads((tmp_path / "cpu" / "identified.json").read_text())
     gpu = json.loads((tmp_path / "gpu" / "identified.json").read_text())
     assert gpu["gap"]["parameters"].keys() == cpu["gap"]["parameters"].keys()
+    def bounds(tree):
+        return {f: e["items"].pop("surrogate error")["value"]
+                for f, e in tree["gap"]["error_budget"]["formulations"].items()
+                if "surrogate error" in e.get("items", {})}
+
+    b_gpu, b_cpu = bounds(gpu), bounds(cpu)
+    assert b_gpu.keys() == b_cpu.keys() and len(b_gpu) > 0
+    assert max_json_difference(b_gpu, b_cpu) <= 1e-4
     assert max_json_difference(gpu, cpu) <= 1e-6
     report = (tmp_path / "gpu" / "report.md").read_text()
     assert "by the solver 'gpu'" in report and "by the solver 'fft'" in (

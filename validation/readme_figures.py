@@ -76,7 +76,9 @@ def measure_tests() -> dict:
     tail = lines[-1] if lines else ""
     counts = {k: int(v) for v, k in re.findall(r"(\d+) (passed|failed|skipped|errors?)", tail)}
     slowest = [ln for ln in lines if re.match(r"\d+\.\d+s (call|setup|teardown)", ln)]
-    return {"wall_s": round(wall, 1), "summary": tail, **counts, "slowest": slowest}
+    failures = [ln.split()[1] for ln in lines if ln.startswith(("FAILED ", "ERROR "))]
+    return {"wall_s": round(wall, 1), "summary": tail, **counts, "slowest": slowest,
+            "failures": failures}
 
 
 def _machine() -> str:
@@ -104,7 +106,8 @@ def block(data: dict) -> str:
             f"`itr-reproduce/solves/` ({r['solves_mb']:.0f} MB: one small Parquet row per "
             f"full solve; the reduced bases' temperature fields are kept there only while the "
             f"run lasts, or with `--keep-fields`, about 320 MB). The tests: "
-            f"{t.get('passed', 0)} passed, {t.get('skipped', 0)} skipped in "
+            + (f"{t['failed']} FAILED, " if t.get("failed") else "")
+            + f"{t.get('passed', 0)} passed, {t.get('skipped', 0)} skipped in "
             f"{t['wall_s'] / 60:.0f} min ({t['date']}). Written by "
             "`validation/readme_figures.py` from `validation/results/readme_figures.json`.")
 
