@@ -129,8 +129,10 @@ def test_film_and_psd_basis_are_stated_inputs_of_the_identification():
 
     args = build_parser().parse_args(["reproduce", "--film-nm", "2", "--psd-basis", "volume"])
     fw = reproduce_settings(args).forward
-    assert fw.rve.min_gap_um == pytest.approx(0.002) and fw.psd_basis == "volume"
-    assert fw.to_dict()["min_gap_um"] == pytest.approx(0.002)
+    # issue 47: the film is the one touching particles meet at; the packing does not change
+    assert fw.rve.film_um == pytest.approx(0.002) and fw.psd_basis == "volume"
+    assert fw.rve.contact_film_um == pytest.approx(0.002) and fw.rve.min_gap_um == 0.0
+    assert fw.to_dict()["film_um"] == pytest.approx(0.002)
     assert fw.to_dict()["psd_basis"] == "volume"
     with pytest.raises(ValueError, match="psd_basis"):
         ForwardSettings(psd_basis="mass")
