@@ -9,7 +9,6 @@ intervals, not a solver. The chi-square tail is checked against scipy.stats.
 from __future__ import annotations
 
 import math
-from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -29,30 +28,11 @@ from itr_identify.inference.model_form import (
 from itr_identify.inference.pipeline import Identification
 from itr_identify.inference.validate import posterior_prediction
 from itr_identify.reporting.headline import headline_lines, parameter_flag
+from tests.stand_in_models import FORMS, StandInModel  # noqa: E402
 
 TRUE = {"R_Al2O3_silicone": 3e-8, "R_AlN_silicone": 1e-7}
-FORMS = ("Al2O3-55", "Al2O3-58", "Al2O3-60", "Al2O3-65", "AlN-55", "AlN-58", "AlN-60", "AlN-62")
 
 
-class _StubModel:
-    """What the calibration reads of a ForwardModel; k_iso (W/(m K)) rises with the filler
-    fraction and falls linearly in log10 of the interface resistance."""
-
-    def __init__(self, formulation: str):
-        self.fractions = fractions_of(formulation)
-        self.parameters = tuple(f"R_{f}_silicone" for f in sorted(self.fractions))
-        self.phi = sum(self.fractions.values())
-        self.rve_scatter = 0.01
-        self.carried_scatter = 0.0
-        self.model_sd = 0.0
-        self.settings = SimpleNamespace(prior_m2K_per_W=(1e-9, 1e-5))
-
-    def predict(self, columns):
-        k = 4.0 * self.phi
-        for p in self.parameters:
-            k = k - 0.4 * (np.log10(np.asarray(columns[p], dtype=float)) + 7.0)
-        k = np.atleast_1d(k)
-        return k, np.zeros(k.shape)
 
 
 def measured(models, *, error, seed=0):
@@ -68,7 +48,7 @@ def measured(models, *, error, seed=0):
 
 @pytest.fixture(scope="module")
 def models():
-    return {f: _StubModel(f) for f in FORMS}
+    return {f: StandInModel(f) for f in FORMS}
 
 
 def test_chi_square_tail_is_scipys():
