@@ -6,7 +6,10 @@ at its defaults, in a new temporary folder, nothing reused) and the default test
 wall time, the child's peak resident memory, the output folder's size by part and the test
 counts in ``validation/results/readme_figures.json``. ``python validation/readme_figures.py
 write`` puts those numbers into README.md between the markers ``<!-- readme-figures -->``
-and ``<!-- /readme-figures -->``; nothing there is typed by hand. ``all`` does both.
+and ``<!-- /readme-figures -->``, and the figures of the result files the README quotes for
+issue 47 (the shipped data's headline, the box study, the contact films, the recovery)
+between ``<!-- result-figures -->`` and ``<!-- /result-figures -->``; nothing there is
+typed by hand. ``all`` does both.
 Options: ``--skip-tests`` (keep the recorded test figures), ``--skip-reproduce``.
 """
 
@@ -32,6 +35,7 @@ ROOT = Path(__file__).resolve().parents[1]
 RESULTS = ROOT / "validation" / "results" / "readme_figures.json"
 README = ROOT / "README.md"
 BEGIN, END = "<!-- readme-figures -->", "<!-- /readme-figures -->"
+RESULTS_BEGIN, RESULTS_END = "<!-- result-figures -->", "<!-- /result-figures -->"
 ITR = [sys.executable, "-m", "itr_identify.cli"]
 
 
@@ -134,14 +138,85 @@ def block(data: dict) -> str:
             "`validation/readme_figures.py` from `validation/results/readme_figures.json`.")
 
 
+def _json(name: str) -> dict | None:
+    path = RESULTS.parent / name
+    return json.loads(path.read_text()) if path.exists() else None
+
+
+def _interval_line(name: str, e: dict) -> str:
+    lo, hi = e["interval_90"]
+    out = f"{name} {e['best']:.2e} (90 % {lo:.2e} - {hi:.2e}; {e['flag']}"
+    if "interval_90_nominal_inputs" in e:
+        a, b = e["interval_90_nominal_inputs"]
+        out += (f"; at the nominal inputs {e.get('best_nominal_inputs', float('nan')):.2e}, "
+                f"{a:.2e} - {b:.2e}")
+    if e.get("narrow_first"):
+        nf = e["narrow_first"]
+        out += (f"; measuring {nf['input']} would leave {nf['interval'][0]:.2e} - "
+                f"{nf['interval'][1]:.2e}")
+    return out + ")"
+
+
+def results_block() -> str:
+    """The README's figures of issue 47's studies, from their result files: the shipped
+    data's headline (``reproduce_identified.json``), the box study, the contact-film table
+    and the recovery against truths that do not share the model."""
+    parts = []
+    ident = _json("reproduce_identified.json")
+    if ident:
+        h = ident["headline"]
+        fit = h.get("fit", {}).get("gap", {})
+        lofo = {p: ident[p].get("leave_one_out", []) for p in ("gap", "area") if p in ident}
+        parts.append(
+            "`itr reproduce` on Table 3 (`validation/results/reproduce.md`, as CI last ran it): "
+            "gap " + "; ".join(_interval_line(n, e) for n, e in h["parameters"]["gap"].items())
+            + (f". The gap fit: chi-square {fit['chi2']:.1f} on {fit['dof']} dof (p "
+               f"{fit['p']:.2g}), model-form error {100 * fit['model_form_sd']:.1f} % of k"
+               if fit else "")
+            + ". Leave-one-formulation-out, measured mean inside the 90 % predictive "
+            "interval: " + ", ".join(f"{p} {sum(r['inside'] for r in rows)} of {len(rows)}"
+                                     for p, rows in lofo.items() if rows) + ".")
+    box = _json("box_study.json")
+    if box:
+        steps = "; ".join(f"{k} um {100 * v['rel']:+.2f} % (90 % {100 * v['lo']:+.2f} .. "
+                          f"{100 * v['hi']:+.2f} %)" for k, v in box["steps"].items())
+        conv = box.get("converged_box_um")
+        parts.append(f"Box study, AlN-60 (`box_study.md`): {steps}; "
+                     + (f"converged at {conv:g} um under the {100 * box['criterion']:.1f} % "
+                        "criterion" if conv else "not converged under the criterion")
+                     + " (the shipped table used 64 um; Al2O3 and the hybrids not run).")
+    film = _json("contact_film.json")
+    if film:
+        ratios = [sum(r["cheap_5nm"]) / sum(r["cheap_0nm"]) for r in film["rows"].values()
+                  if r.get("cheap_5nm") and r.get("cheap_0nm")]
+        if ratios:
+            parts.append(f"A 5 nm contact film lowers k of the cheap RVE by "
+                         f"{100 * (1 - max(ratios)):.1f}-{100 * (1 - min(ratios)):.1f} % "
+                         f"across the {len(ratios)} formulations (`contact_film.md`).")
+    rec = _json("input_recovery.json")
+    if rec:
+        rows = [f"{name}: {p} {d['covered']} of {d['seeds']}"
+                + ("" if d["passes"] else " (MISSES acceptance)")
+                for name, t in rec.items() for p, d in t["parameters"].items()]
+        parts.append("Recovery against truths that do not share the model "
+                     "(`input_recovery.md`; 90 % marginal intervals holding the truth, noise "
+                     "seeds): " + "; ".join(rows) + ".")
+    return " ".join(parts) + " Written by `validation/readme_figures.py` from those files."
+
+
+def _replace(path: Path, begin: str, end: str, text: str) -> None:
+    doc = path.read_text()
+    if begin not in doc or end not in doc:
+        raise SystemExit(f"{path.name} has no {begin} ... {end} block")
+    head, rest = doc.split(begin, 1)
+    _, tail = rest.split(end, 1)
+    wrapped = "\n".join(textwrap.wrap(text, width=100, break_on_hyphens=False))
+    path.write_text(f"{head}{begin}\n{wrapped}\n{end}{tail}")
+
+
 def write(data: dict) -> None:
-    text = README.read_text()
-    if BEGIN not in text or END not in text:
-        raise SystemExit(f"README.md has no {BEGIN} ... {END} block")
-    head, rest = text.split(BEGIN, 1)
-    _, tail = rest.split(END, 1)
-    wrapped = "\n".join(textwrap.wrap(block(data), width=100, break_on_hyphens=False))
-    README.write_text(f"{head}{BEGIN}\n{wrapped}\n{END}{tail}")
+    _replace(README, BEGIN, END, block(data))
+    _replace(README, RESULTS_BEGIN, RESULTS_END, results_block())
 
 
 def main() -> None:

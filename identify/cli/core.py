@@ -196,8 +196,9 @@ def rve_arguments(p: argparse.ArgumentParser, *, box: str, voxel: str) -> None:
                    help="packing seed of the first replica (default 1)")
     p.add_argument("--film-nm", type=number(float, 0, 100, lo_open=False, unit=" nm"),
                    default=None, help="silicone film at which touching particles meet, nm, "
-                   "the same for every particle size (default 0: particles in contact "
-                   "through their two interface resistances alone); the packing does not "
+                   "the same for every particle size, held in the intervals (default: "
+                   "the models at 0, in contact through the two interface resistances "
+                   "alone, and the film marginalised over 0-5 nm); the packing does not "
                    "change with it")
     p.add_argument("--psd-basis", choices=["number", "volume"], default=None,
                    help="weighting of Table 1's lognormals (default number: the paper's "

@@ -559,9 +559,11 @@ class ForwardModel:
         return self.engine if self.engine is not None else _SERIAL
 
     def _request(self, replica: int, mat: Materials, *, purpose: str,
-                 fields: bool = False, tol: float | None = None) -> SolveRequest:
+                 fields: bool = False, tol: float | None = None,
+                 film_m: float | None = None) -> SolveRequest:
+        ms = self.microstructures[replica]
         return SolveRequest.for_materials(
-            RVEData.of(self.microstructures[replica]), mat,
+            RVEData.of(ms if film_m is None else ms.with_film(film_m)), mat,
             self.settings.solver_tol if tol is None else tol,
             solver=self.settings.solver, fields=fields, purpose=purpose,
             formulation=self.formulation, replica=replica)
@@ -585,8 +587,10 @@ class ForwardModel:
         return results
 
     def solve_first(self, values: Mapping[str, float], *, purpose: str,
-                    tol: float | None = None) -> np.ndarray:
+                    tol: float | None = None, film_m: float | None = None) -> np.ndarray:
         """Full solve (3,) of the first replica at ``values`` (with :attr:`fixed`), recorded
-        in :attr:`solves`; ``tol``: the solver's relative residual (default the settings')."""
-        request = self._request(0, self.materials(values), purpose=purpose, tol=tol)
+        in :attr:`solves`; ``tol``: the solver's relative residual (default the settings');
+        ``film_m``: touching particles at this film, m (default the RVE's own)."""
+        request = self._request(0, self.materials(values), purpose=purpose, tol=tol,
+                                film_m=film_m)
         return self._solve_recorded([request])[0].k_diagonal

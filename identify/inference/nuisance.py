@@ -1,5 +1,5 @@
 """Inputs the forward model holds fixed, marginalised: the matrix and the filler
-conductivities.
+conductivities, and the film at which touching particles meet.
 
 Every face conductance of the discrete model scales by ``lam`` when every conductivity does
 and every resistance is divided by it, so exactly
@@ -19,16 +19,27 @@ first order in ``ln(mu_f / lam)`` (s_f is 0.02 for AlN-60 and 0.12 for Al2O3-60 
 RVE: the filler's conductivity matters little behind its interface resistance). No full
 solve is added per input value: the inputs enter through the models already built.
 
-Each input has a lognormal prior (:class:`InputPrior`: nominal value and relative standard
+The film enters the same way, to first order: k_model times ``exp(s_film film)``, with
+``s_film = d ln k_eff / d film`` (1/nm) the secant from the models' film 0 to
+:data:`FILM_STEP_NM` on the first replica's particles (one full solve per formulation); k
+falls about linearly with the film over 0-5 nm (``validation/results/contact_film.md``:
+k(1) / k(0) 0.991, k(2) / k(0) 0.983, k(5) / k(0) 0.960 for Al2O3-60), so the secant is
+within a few 0.1 % of k over the range. Its prior (:class:`FilmPrior`) is uniform over a
+range of films (default 0-5 nm), integrated by :data:`FILM_NODES` Gauss-Legendre nodes.
+
+Each conductivity has a lognormal prior (:class:`InputPrior`: nominal value and relative standard
 deviation; :data:`DEFAULT_PRIORS` argued in ``docs/identification.md``). The posterior of
 the resistances with the inputs integrated out is a mixture over a Gauss-Hermite product
 grid of the inputs' log values (:data:`NODES` per input): each node a full calibration
 (:func:`~itr_identify.inference.calibrate.calibrate`, the same grid in R), weighted by its
 quadrature weight times its evidence (:attr:`Posterior.log_evidence`: how well the data
 like those input values). Samples of the marginal posterior are drawn from the nodes by
-weight; the best values stay the nominal node's (the interval is moved to hold them where
-needed, as every interval is). The variance of each log10 resistance splits into the part
-the data leave at fixed inputs (``measurements``) and one share per input (the weighted
+weight; its best values are its own central point
+(:meth:`~itr_identify.inference.calibrate.Posterior.central`: the sample nearest the
+marginal medians), not the nominal node's, which can sit at an end of the marginal interval
+when the data prefer other inputs. The nominal calibration stays where the models are
+checked at the inputs they were built at (``Identification.at_nominal``). The variance of
+each log10 resistance splits into the part the data leave at fixed inputs (``measurements``) and one share per input (the weighted
 regression of the nodes' posterior means on the inputs' standardised log values, scaled to
 sum to the between-node part: the shares and ``measurements`` sum to 1).
 """
@@ -49,8 +60,8 @@ from ..forward.model import ForwardModel
 from .calibrate import Posterior, calibrate
 from .measurements import Measurements
 
-__all__ = ["InputPrior", "DEFAULT_PRIORS", "NODES", "ScaledModel", "elasticities",
-           "marginalise", "default_priors", "narrowing"]
+__all__ = ["InputPrior", "FilmPrior", "DEFAULT_PRIORS", "DEFAULT_FILM", "NODES", "ScaledModel",
+           "elasticities", "marginalise", "default_priors", "narrowing"]
 
 #: Gauss-Hermite nodes per input (the matrix first; a filler's conductivity, whose
 #: elasticity is small, takes :data:`FILLER_NODES`).
@@ -61,6 +72,11 @@ ELASTICITY_STEP = 0.8
 #: Relative residual of the elasticity's two solves: a difference quotient needs its solves
 #: far tighter than the difference (ln 0.8 s_f is a few 1e-3).
 ELASTICITY_TOL = 1e-11
+#: Gauss-Legendre nodes of the film's uniform prior.
+FILM_NODES = 3
+#: The film of the film elasticity's solve, nm (the middle of the default prior: a secant
+#: over it, k falling about linearly with the film there, ``contact_film.md``).
+FILM_STEP_NM = 2.5
 #: Grid points per parameter of a node's calibration other than the nominal one (the
 #: mixture is a quadrature of the inputs; each node's own interval needs no finer grid).
 NODE_GRID_POINTS = 61
@@ -101,6 +117,35 @@ class InputPrior:
         return parse_parameter(self.name)[1][0]
 
 
+@dataclass(frozen=True)
+class FilmPrior:
+    """A uniform prior of the silicone film at which touching particles meet.
+
+    Attributes
+    ----------
+    low_nm, high_nm : float
+        Its range, nm (0 <= low < high <= 20); the forward models are built at film 0.
+    """
+
+    low_nm: float = 0.0
+    high_nm: float = 5.0
+    name: str = "film_nm"
+
+    def __post_init__(self) -> None:
+        for key in ("low_nm", "high_nm"):
+            v = getattr(self, key)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and 0 <= v <= 20):
+                raise ValueError(f"film {key}: expected a film in [0, 20] nm, got {v!r}")
+        if not self.low_nm < self.high_nm:
+            raise ValueError(f"film: expected low_nm < high_nm, got {self.low_nm!r}, "
+                             f"{self.high_nm!r}")
+
+
+#: The film's default prior: uniform over 0-5 nm (``docs/identification.md``: the range the
+#: contact-film table measures; k falls 4-5 % over it).
+DEFAULT_FILM = FilmPrior()
+
+
 #: Relative standard deviations of the default priors (see ``docs/identification.md``):
 #: an unmeasured neat silicone (0.15-0.22 W/(m K) for the cured PDMS grades of gap fillers:
 #: 10 %), alumina powder (polycrystalline 20-40 W/(m K): 15 %), aluminium nitride powder
@@ -124,13 +169,13 @@ class ScaledModel:
     through."""
 
     def __init__(self, model: ForwardModel, lam: float, mu: Mapping[str, float],
-                 elasticity: Mapping[str, float]):
+                 elasticity: Mapping[str, float], film_nm: float = 0.0):
         self.model = model
         self.lam = float(lam)
         f = self.lam
         for filler in model.fractions:
             f *= (float(mu.get(filler, 1.0)) / self.lam) ** float(elasticity.get(filler, 0.0))
-        self.factor = f
+        self.factor = f * math.exp(float(elasticity.get("film_nm", 0.0)) * float(film_nm))
 
     def __getattr__(self, name: str):
         return getattr(self.model, name)
@@ -141,11 +186,12 @@ class ScaledModel:
         return k * self.factor, err * self.factor
 
 
-def elasticities(models: Mapping[str, ForwardModel], values: Mapping[str, float]
-                 ) -> dict[str, dict[str, float]]:
+def elasticities(models: Mapping[str, ForwardModel], values: Mapping[str, float], *,
+                 film: bool = False) -> dict[str, dict[str, float]]:
     """Per formulation and filler: d ln k_eff / d ln k_f at ``values`` (m^2 K/W), from full
-    solves of the first replica at nominal and with k_f times :data:`ELASTICITY_STEP`, both to
-    the relative residual :data:`ELASTICITY_TOL`."""
+    solves of the first replica at nominal and with k_f times :data:`ELASTICITY_STEP`, all to
+    the relative residual :data:`ELASTICITY_TOL`; with ``film``, also ``film_nm``: d ln k_eff
+    / d film (1/nm), the secant from film 0 to :data:`FILM_STEP_NM` on the same particles."""
     k = paper_data.PAPER_CONDUCTIVITY
     out = {}
     for f, m in models.items():
@@ -158,17 +204,25 @@ def elasticities(models: Mapping[str, ForwardModel], values: Mapping[str, float]
             low = float(m.solve_first(scaled, purpose="conductivity elasticity",
                                       tol=ELASTICITY_TOL).mean())
             out[f][filler] = math.log(low / base) / math.log(ELASTICITY_STEP)
+        if film:
+            thin = float(m.solve_first(own, purpose="film elasticity", tol=ELASTICITY_TOL,
+                                       film_m=FILM_STEP_NM * 1e-9).mean())
+            out[f]["film_nm"] = math.log(thin / base) / FILM_STEP_NM
     return out
 
 
-def _nodes(priors: Sequence[InputPrior]) -> tuple[np.ndarray, np.ndarray]:
-    """Standardised nodes (J, inputs) and log weights (J,) of the product grid."""
+def _nodes(priors: Sequence[InputPrior | FilmPrior]) -> tuple[np.ndarray, np.ndarray]:
+    """Standardised nodes (J, inputs) and log weights (J,) of the product grid (a film: its
+    nodes in [-1, 1] over its range)."""
     axes, logw = [], []
     for i, pr in enumerate(priors):
-        n = NODES if i == 0 else FILLER_NODES
-        if pr.rel_sd == 0:
-            n = 1
-        x, w = np.polynomial.hermite_e.hermegauss(n)
+        if isinstance(pr, FilmPrior):
+            x, w = np.polynomial.legendre.leggauss(FILM_NODES)
+        else:
+            n = NODES if i == 0 else FILLER_NODES
+            if pr.rel_sd == 0:
+                n = 1
+            x, w = np.polynomial.hermite_e.hermegauss(n)
         axes.append(x)
         logw.append(np.log(w / w.sum()))
     z = np.array(list(itertools.product(*axes))).reshape(-1, len(priors))
@@ -188,11 +242,13 @@ def marginalise(models: Mapping[str, ForwardModel], measurements: Measurements,
         As for :func:`~itr_identify.inference.calibrate.calibrate`.
     nominal : Posterior
         The calibration at the nominal inputs (its ``model_form_sd`` is kept at every node).
-    priors : mapping of name to InputPrior
-        The inputs to integrate out (``k_<matrix>`` and ``k_<filler>``); their nominal values
-        must be those the models were built at.
+    priors : mapping of name to InputPrior or FilmPrior
+        The inputs to integrate out (``k_<matrix>`` and ``k_<filler>``; ``film_nm``, a
+        :class:`FilmPrior`, where the models were built at film 0); the conductivities'
+        nominal values must be those the models were built at.
     elasticity : mapping
-        :func:`elasticities` of the models.
+        :func:`elasticities` of the models (with ``film_nm`` where the film is integrated
+        out).
     matrix : str
         The matrix phase.
 
@@ -205,9 +261,16 @@ def marginalise(models: Mapping[str, ForwardModel], measurements: Measurements,
         the nodes' weights.
     """
     k0 = paper_data.PAPER_CONDUCTIVITY
-    order = sorted(priors, key=lambda n: (n != f"k_{matrix}", n))
+    order = sorted(priors, key=lambda n: (isinstance(priors[n], FilmPrior),
+                                          n != f"k_{matrix}", n))
     prs = [priors[n] for n in order]
+    if any(isinstance(pr, FilmPrior) for pr in prs) and any(
+            "film_nm" not in e for e in elasticity.values()):
+        raise ValueError("elasticity: a film prior needs the film elasticity of every model "
+                         "(elasticities(..., film=True))")
     for pr in prs:
+        if isinstance(pr, FilmPrior):
+            continue
         if not math.isclose(pr.nominal, float(k0[pr.phase]), rel_tol=1e-12):
             raise ValueError(f"{pr.name}: the forward models were built at "
                              f"{float(k0[pr.phase]):g} W/(m K); a prior centred elsewhere "
@@ -215,13 +278,15 @@ def marginalise(models: Mapping[str, ForwardModel], measurements: Measurements,
     z, logw = _nodes(prs)
     posts, log_post_w = [], []
     for row, lw in zip(z, logw):
-        value = {pr.name: pr.nominal * math.exp(pr.rel_sd * x) for pr, x in zip(prs, row)}
+        value = {pr.name: _value(pr, x) for pr, x in zip(prs, row)}
         lam = value.get(f"k_{matrix}", k0[matrix]) / k0[matrix]
-        mu = {pr.phase: value[pr.name] / pr.nominal for pr in prs if pr.phase != matrix}
-        if np.all(row == 0):
+        mu = {pr.phase: value[pr.name] / pr.nominal for pr in prs
+              if isinstance(pr, InputPrior) and pr.phase != matrix}
+        film_nm = value.get("film_nm", 0.0)
+        if np.all(row == 0) and film_nm == 0:
             post = nominal
         else:
-            scaled = {f: ScaledModel(m, lam, mu, elasticity.get(f, {}))
+            scaled = {f: ScaledModel(m, lam, mu, elasticity.get(f, {}), film_nm)
                       for f, m in models.items()}
             kw = {**calibrate_kw, "grid_points": min(calibrate_kw.get("grid_points", 121),
                                                      NODE_GRID_POINTS)}
@@ -239,10 +304,14 @@ def marginalise(models: Mapping[str, ForwardModel], measurements: Measurements,
     samples = np.vstack([posts[j].samples[rng.integers(0, posts[j].samples.shape[0],
                                                         int(np.sum(pick == j))), :][:, cols[j]]
                          for j in range(len(posts)) if np.any(pick == j)])
-    marginal = Posterior(list(names), samples, dict(nominal.best), nominal.prior,
-                         stages=nominal.stages, model_form_sd=nominal.model_form_sd,
+    marginal = Posterior(list(names), samples, {}, nominal.prior, stages=nominal.stages,
+                         model_form_sd=nominal.model_form_sd,
                          log_evidence=float(lpw.max() + math.log(np.exp(lpw - lpw.max()).sum())))
-    record = {"inputs": {pr.name: {"nominal": pr.nominal, "rel_sd": pr.rel_sd} for pr in prs},
+    marginal.best = marginal.central()
+    record = {"inputs": {pr.name: ({"low_nm": pr.low_nm, "high_nm": pr.high_nm}
+                                   if isinstance(pr, FilmPrior) else
+                                   {"nominal": pr.nominal, "rel_sd": pr.rel_sd})
+                         for pr in prs},
               "nodes": len(posts), "parameters": {}}
     input_names = [pr.name for pr in prs]
     for n in names:
@@ -264,6 +333,13 @@ def marginalise(models: Mapping[str, ForwardModel], measurements: Measurements,
     return marginal, record
 
 
+def _value(prior: InputPrior | FilmPrior, x: float) -> float:
+    """An input's value at the standardised node ``x`` (W/(m K), or nm for a film)."""
+    if isinstance(prior, FilmPrior):
+        return prior.low_nm + (x + 1.0) / 2.0 * (prior.high_nm - prior.low_nm)
+    return prior.nominal * math.exp(prior.rel_sd * x)
+
+
 def _mixture_interval(posts: Sequence[Posterior], w: np.ndarray, name: str,
                       nominal: Posterior, seed: int, n_samples: int = 4000) -> list[float]:
     """The 90 % interval (m^2 K/W) of ``name`` over the nodes weighted ``w`` (an input known
@@ -275,7 +351,7 @@ def _mixture_interval(posts: Sequence[Posterior], w: np.ndarray, name: str,
                                                        int(np.sum(pick == j))),
                                          posts[j].names.index(name)]
                         for j in range(len(posts)) if np.any(pick == j)])
-    post = Posterior([name], x[:, None], {name: nominal.best[name]}, nominal.prior)
+    post = Posterior([name], x[:, None], {}, nominal.prior)
     return list(post.interval(name))
 
 

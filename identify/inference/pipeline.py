@@ -34,10 +34,17 @@ from .calibrate import Posterior, calibrate
 from .formulations import fractions_of
 from .measurements import Measurements
 from .model_form import misfit_note, with_model_form
-from .nuisance import InputPrior, default_priors, elasticities, marginalise
+from .nuisance import (
+    DEFAULT_FILM,
+    FilmPrior,
+    InputPrior,
+    default_priors,
+    elasticities,
+    marginalise,
+)
 from .screen import ScreenResult, hierarchical_screen
 
-__all__ = ["Identification", "identify", "CARRIED_DRAWS"]
+__all__ = ["Identification", "identify", "default_inputs", "film_is_zero", "CARRIED_DRAWS"]
 
 #: Draws of the earlier stages' posterior whose spread a later stage's likelihood carries.
 CARRIED_DRAWS = 6
@@ -58,10 +65,19 @@ class Identification:
     fit: dict = field(default_factory=dict)
     inputs: dict = field(default_factory=dict)
     alone: list[dict] = field(default_factory=list)
+    nominal: Posterior | None = None
 
     @property
     def n_parameters(self) -> int:
         return len(self.posterior.names)
+
+    @property
+    def at_nominal(self) -> Posterior:
+        """The calibration at the nominal inputs (the models as built): where the models are
+        checked against full solves and the measurements (validation, residuals, the fit's
+        test). :attr:`posterior` is the marginal one where inputs were marginalised; its
+        best values are the marginal's, which the nominal models need not reproduce."""
+        return self.posterior if self.nominal is None else self.nominal
 
     def residuals(self, *, model_form: bool = False) -> dict[str, tuple[float, float, float]]:
         """Per formulation at the best values: (measured mean, model k_iso, likelihood
@@ -69,8 +85,9 @@ class Identification:
         (the fit's test) unless ``model_form``."""
         from .calibrate import residuals
 
-        return residuals(self.models, self.measurements, self.posterior.best,
-                         self.posterior.model_form_sd if model_form else 0.0)
+        post = self.at_nominal
+        return residuals(self.models, self.measurements, post.best,
+                         post.model_form_sd if model_form else 0.0)
 
     def held(self) -> dict[str, dict]:
         """Per two-filler formulation: the single-filler parameters it is held at
@@ -98,7 +115,7 @@ def identify(measurements: Measurements, parametrisation: str = "gap", *,
              reuse: Mapping[str, ForwardModel] | None = None, progress: bool = False,
              echo: Callable[[str], None] = print,
              engine: SolveEngine | None = None,
-             inputs: Mapping[str, InputPrior] | None = None) -> Identification:
+             inputs: Mapping[str, InputPrior | FilmPrior] | None = None) -> Identification:
     """Calibrate and screen the interface parameters of one parametrisation.
 
     Parameters
@@ -123,10 +140,11 @@ def identify(measurements: Measurements, parametrisation: str = "gap", *,
     engine : SolveEngine, optional
         Where every full solve runs and is kept (:mod:`itr_surrogate.engine`; default:
         this process, nothing kept).
-    inputs : mapping of name to InputPrior, optional
-        The conductivities to marginalise (:mod:`itr_identify.inference.nuisance`; default
-        its :func:`~itr_identify.inference.nuisance.default_priors` for the matrix and every
-        filler; ``{}`` or a zero sd holds an input at its nominal value).
+    inputs : mapping of name to InputPrior or FilmPrior, optional
+        The inputs to marginalise (:mod:`itr_identify.inference.nuisance`; default
+        :func:`default_inputs`: the conductivities of the matrix and every filler, and the
+        film where the settings state none; ``{}`` or a zero sd holds an input at its
+        nominal value).
     """
     if parametrisation not in PARAMETRISATIONS:
         raise ValueError(f"parametrisation: expected one of {sorted(PARAMETRISATIONS)}, got "
@@ -137,6 +155,13 @@ def identify(measurements: Measurements, parametrisation: str = "gap", *,
     singles = [f for f in comps if len(comps[f]) == 1]
     multis = [f for f in comps if len(comps[f]) > 1]
     faithful = settings.faithful if par.name == "gap" else None
+    priors = default_inputs(sorted({MATRIX, *(x for f in comps.values() for x in f)}),
+                            settings) if inputs is None else dict(inputs)
+    priors = {n: p for n, p in priors.items() if isinstance(p, FilmPrior) or p.rel_sd > 0}
+    film = any(isinstance(p, FilmPrior) for p in priors.values())
+    if film and not film_is_zero(settings):
+        raise ValueError("inputs: a film prior needs forward models built at film 0 (the "
+                         "settings state a film; hold it instead)")
     rounds: list[dict] = []
     t0 = time.perf_counter()
     models: dict[str, ForwardModel] = {}
@@ -194,14 +219,13 @@ def identify(measurements: Measurements, parametrisation: str = "gap", *,
     post, fit = with_model_form(models, measurements, post, grid_points=grid_points, seed=seed)
     echo(f"  {par.name}: {misfit_note(fit)}")
     inputs_record: dict = {}
-    priors = default_priors(sorted({MATRIX, *(x for f in comps.values() for x in f)})) \
-        if inputs is None else dict(inputs)
-    priors = {n: p for n, p in priors.items() if p.rel_sd > 0}
+    nominal = post
     if priors:
         t = time.perf_counter()
-        echo(f"  {par.name}: conductivities marginalised ({', '.join(sorted(priors))}; "
-             "one full solve per filler and formulation for its elasticity)")
-        elastic = elasticities(models, post.best)
+        echo(f"  {par.name}: inputs marginalised ({', '.join(sorted(priors))}; one full "
+             "solve per filler" + (" and one at a film" if film else "")
+             + " and formulation for its elasticity)")
+        elastic = elasticities(models, post.best, film=film)
         post, inputs_record = marginalise(models, measurements, post, priors,
                                           elasticity=elastic, grid_points=grid_points,
                                           seed=seed)
@@ -213,7 +237,25 @@ def identify(measurements: Measurements, parametrisation: str = "gap", *,
     screening = hierarchical_screen(models, measurements)
     seconds["screening"] = time.perf_counter() - t
     return Identification(parametrisation, settings, models, post, screening, seconds,
-                          measurements, rounds, fit, inputs_record, alone)
+                          measurements, rounds, fit, inputs_record, alone,
+                          None if post is nominal else nominal)
+
+
+def film_is_zero(settings: ForwardSettings) -> bool:
+    """Whether the settings' RVEs have touching particles at film 0 (none stated)."""
+    rve = settings.rve
+    film = rve.min_gap_um if rve.film_um is None else rve.film_um
+    return film == 0
+
+
+def default_inputs(phases, settings: ForwardSettings) -> dict[str, InputPrior | FilmPrior]:
+    """The inputs :func:`identify` marginalises by default: every phase's conductivity
+    (:func:`~itr_identify.inference.nuisance.default_priors`) and, where the settings state
+    no film, the film (:data:`~itr_identify.inference.nuisance.DEFAULT_FILM`)."""
+    out: dict[str, InputPrior | FilmPrior] = dict(default_priors(phases))
+    if settings.rve.film_um is None and settings.rve.min_gap_um == 0:
+        out[DEFAULT_FILM.name] = DEFAULT_FILM
+    return out
 
 
 def _runtime(models: dict[str, ForwardModel], names: list[str], echo: Callable) -> list[str]:

@@ -143,7 +143,7 @@ def error_budget(ident: Identification) -> dict:
     (per identified resistance: d ln k / d ln R and each effect as a factor on R, the 90 %
     interval's half-width as a factor), ``dominant`` and ``numerical_below_noise``."""
     post, s = ident.posterior, ident.settings
-    best = post.best
+    best = ident.at_nominal.best          # the models' own inputs: where they predict
     faithful = s.faithful if ident.parametrisation == "gap" else None
     forms: dict[str, dict] = {}
     for stage in stages_of(ident.models):

@@ -187,7 +187,7 @@ def surrogate_check(validation: Mapping[str, list[dict]],
             m = ident.models[row["formulation"]]
             if m.rb is None:
                 continue
-            k, lo, hi = m.first_replica_k({p: ident.posterior.best[p] for p in m.parameters})
+            k, lo, hi = m.first_replica_k({p: ident.at_nominal.best[p] for p in m.parameters})
             full = row["replica_k_iso_raw"][0]
             out[par].append({"formulation": row["formulation"], "full_solve": full,
                              "reduced_basis": k, "lower": lo, "upper": hi,
@@ -308,7 +308,7 @@ def posterior_figure(ident: Identification, path: Path) -> Path:
         labels = [parameter_label(p, log10=True) for p in st.parameters]
         marks = [None if paper.get(p) is None else float(np.log10(paper[p]))
                  for p in st.parameters]
-        best = [float(np.log10(ident.posterior.best[p])) for p in st.parameters]
+        best = [float(np.log10(ident.at_nominal.best[p])) for p in st.parameters]
         if dens.ndim == 2:
             mesh = ax.pcolormesh(axes_[0], axes_[1], dens.T, shading="auto", cmap="viridis")
             fig.colorbar(mesh, ax=ax, label="posterior mass per grid cell")
@@ -363,9 +363,10 @@ def alone_figure(ident: Identification, path: Path) -> Path | None:
         hi = np.array([r["interval_90"][1] for r in mine])
         ax.errorbar(x, best, yerr=[best - lo, hi - best], fmt="o", capsize=4,
                     label="each formulation alone (90 %)")
-        jlo, jhi = ident.posterior.interval(p)
-        ax.axhspan(jlo, jhi, color="C1", alpha=0.25, label="joint fit (90 %)")
-        ax.axhline(ident.posterior.best[p], color="C1", lw=1)
+        joint = ident.at_nominal          # the formulations alone hold the inputs nominal
+        jlo, jhi = joint.interval(p)
+        ax.axhspan(jlo, jhi, color="C1", alpha=0.25, label="joint fit, nominal inputs (90 %)")
+        ax.axhline(joint.best[p], color="C1", lw=1)
         ax.set_yscale("log")
         ax.set_xlabel("filler volume fraction (%)")
         ax.set_ylabel(parameter_label(p))

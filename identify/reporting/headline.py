@@ -352,6 +352,7 @@ def headline(idents: Mapping[str, Identification]) -> dict:
         for n, rec in i.inputs.get("parameters", {}).items():
             shares = {k: v for k, v in sorted(rec["shares"].items(), key=lambda kv: -kv[1])}
             params[p][n].update(
+                best_nominal_inputs=i.at_nominal.best[n],
                 interval_90_nominal_inputs=list(rec["interval_nominal"]),
                 variance_shares=shares,
                 narrow_first=narrowing(i.inputs, n)[0] if rec.get("if_known") else None)
@@ -406,7 +407,8 @@ def headline_lines(head: dict, width: int = 100) -> list[str]:
                          f"{hi:.2e}; {e['flag']})")
             if "interval_90_nominal_inputs" in e:
                 a, b = e["interval_90_nominal_inputs"]
-                lines.append(f"    at the nominal conductivities: {a:.2e} - {b:.2e}")
+                lines.append(f"    at the nominal inputs: {e['best_nominal_inputs']:.2e}"
+                             f" ({a:.2e} - {b:.2e})")
             if "interval_90_without_model_form" in e:
                 a, b = e["interval_90_without_model_form"]
                 lines.append(f"    without the model-form error: {a:.2e} - {b:.2e}")
@@ -453,19 +455,22 @@ def headline_markdown(head: dict) -> list[str]:
     inputs = [(par, n, e) for par, params in head["parameters"].items()
               for n, e in params.items() if e.get("variance_shares")]
     if inputs:
-        lines += ["", "The conductivities are marginalised (`itr_identify.inference.nuisance`): "
-                  "the interval at the paper's conductivities, each input's share of the "
-                  "variance of log10 of the value, and the input whose measurement would "
-                  "narrow the interval most:", "",
-                  "| parametrisation | parameter | at the nominal conductivities | shares | "
+        lines += ["", "The conductivities (and, where none is stated, the contact film, "
+                  "uniform over 0-5 nm) are marginalised (`itr_identify.inference.nuisance`): "
+                  "the best value and interval at the nominal inputs (the paper's "
+                  "conductivities, film 0), each input's share of the variance of log10 of "
+                  "the value, and the input whose measurement would narrow the interval "
+                  "most (a film: known at the middle of its range):", "",
+                  "| parametrisation | parameter | at the nominal inputs | shares | "
                   "narrows most (interval if known) |", "|---|---|---|---|---|"]
         for par, n, e in inputs:
             a, b = e["interval_90_nominal_inputs"]
+            at = f"{e['best_nominal_inputs']:.2e} ({a:.2e} - {b:.2e})"
             shares = ", ".join(f"{k} {100 * v:.0f} %" for k, v in e["variance_shares"].items())
             nf = e.get("narrow_first")
             narrow = "-" if not nf else (f"{nf['input']} ({nf['interval'][0]:.2e} - "
                                          f"{nf['interval'][1]:.2e})")
-            lines.append(f"| {par} | {n} | {a:.2e} - {b:.2e} | {shares} | {narrow} |")
+            lines.append(f"| {par} | {n} | {at} | {shares} | {narrow} |")
     lines += ["", f"Quote **{head['quote']}**: {head['why']}. These values hold at fidelity "
               f"`{head['fidelity']}` ({head['holds_at']}); the error budget below gives what "
               "the RVE leaves out. " + _legend(head)]

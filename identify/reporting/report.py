@@ -315,10 +315,13 @@ def settings_lines(idents: Mapping[str, Identification], extra: Mapping[str, obj
              + box_cut_phrase(s, fillers_of(ident))
              + " of Table 1's distributions (replaced by smaller particles); conductivities "
              + conductivities_used(ident),
-             f"- stated inputs: silicone film between touching particles "
-             f"{1000 * s.rve.contact_film_um:g} nm (`--film-nm`; 0 = in contact through the "
-             f"two interface resistances alone, at every particle size), Table 1 read as "
-             f"{s.psd_basis}-weighted (`--psd-basis`)",
+             "- stated inputs: silicone film between touching particles "
+             + (f"{1000 * s.rve.contact_film_um:g} nm (`--film-nm`, held)"
+                if "film_nm" not in ident.inputs.get("inputs", {}) else
+                "0 nm in the models, marginalised over 0-5 nm (uniform; `--film-nm` states "
+                "and holds one)")
+             + f" (0 = in contact through the two interface resistances alone, at every "
+             f"particle size), Table 1 read as {s.psd_basis}-weighted (`--psd-basis`)",
              f"- prior: log-uniform {s.prior_m2K_per_W[0]:g} - {s.prior_m2K_per_W[1]:g} "
              "m^2 K/W for every resistance; screening grid 1e-8 - 1e-5 (the paper's)",
              f"- reduced basis: relative bound gap {s.rb_tol:g}, at most {s.rb_max_solves} "

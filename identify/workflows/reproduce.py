@@ -64,13 +64,16 @@ class ReproduceSettings:
     conductivity_sd: tuple[tuple[str, float], ...] = ()
 
     def input_priors(self, phases) -> dict:
-        """The :class:`~itr_identify.inference.nuisance.InputPrior` of every phase of
-        ``phases``: the defaults, with :attr:`conductivity_sd` where given."""
-        from ..inference.nuisance import InputPrior, default_priors
+        """The inputs marginalised: the defaults of
+        :func:`~itr_identify.inference.pipeline.default_inputs` (every phase of ``phases``,
+        the film where none is stated), with :attr:`conductivity_sd` where given."""
+        from ..inference.nuisance import InputPrior
+        from ..inference.pipeline import default_inputs
 
         given = dict(self.conductivity_sd)
-        return {n: InputPrior(n, p.nominal, given.get(p.phase, p.rel_sd))
-                for n, p in default_priors(sorted(phases)).items()}
+        return {n: (InputPrior(n, p.nominal, given.get(p.phase, p.rel_sd))
+                    if isinstance(p, InputPrior) else p)
+                for n, p in default_inputs(sorted(phases), self.forward).items()}
 
     @classmethod
     def at_fidelity(cls, level: str) -> "ReproduceSettings":
@@ -138,7 +141,7 @@ def _temperature_field(ident: Identification, formulation: str, out: Path) -> li
     from itr_surrogate.engine import RVEData, cached_problem
 
     m = ident.models[formulation]
-    best = {p: ident.posterior.best[p] for p in m.parameters}
+    best = {p: ident.at_nominal.best[p] for p in m.parameters}
     mat = m.materials(best)
     problem = cached_problem(RVEData.of(m.microstructures[0]), mat.contact)[0]
     with warnings.catch_warnings():
@@ -236,7 +239,7 @@ def _reproduce(settings: ReproduceSettings, out: Path, progress: bool,
          "formulation at the identified values")
     with _bar(n_val, "validation solves", progress) as bar:
         for par, ident in idents.items():
-            validation[par] = validate(ident.models, ident.posterior.best, meas,
+            validation[par] = validate(ident.models, ident.at_nominal.best, meas,
                                        tick=lambda: bar.update(1))
     t_val = time.perf_counter() - t
     t = time.perf_counter()
