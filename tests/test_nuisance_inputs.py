@@ -218,6 +218,11 @@ def test_the_film_is_marginalised_by_default_only_where_none_is_stated():
     assert set(got) == {"k_silicone", "k_Al2O3", "film_nm"} and got["film_nm"] == DEFAULT_FILM
     stated = ForwardSettings(rve=RVESpec(box_um=12.0, voxel_um=0.25, film_um=0.0))
     assert "film_nm" not in default_inputs(["silicone", "Al2O3"], stated)
+    from itr_identify.inference.pipeline import marginalised_inputs
+
+    assert "film_nm" in marginalised_inputs(got, contact="gap", settings=free)
+    area = marginalised_inputs(got, contact="area", settings=free)
+    assert set(area) == {"k_silicone", "k_Al2O3"}        # the per-area model has no film
     thick = ForwardSettings(rve=RVESpec(box_um=12.0, voxel_um=0.25, film_um=0.003))
     meas = Measurements({"Al2O3-60": [1.6, 1.62]}, "stub")
     with pytest.raises(ValueError, match="film 0"):

@@ -39,9 +39,10 @@ weight; its best values are its own central point
 marginal medians), not the nominal node's, which can sit at an end of the marginal interval
 when the data prefer other inputs. The nominal calibration stays where the models are
 checked at the inputs they were built at (``Identification.at_nominal``). The variance of
-each log10 resistance splits into the part the data leave at fixed inputs (``measurements``) and one share per input (the weighted
-regression of the nodes' posterior means on the inputs' standardised log values, scaled to
-sum to the between-node part: the shares and ``measurements`` sum to 1).
+each log10 resistance splits into the part the data leave at fixed inputs
+(``measurements``) and one share per input (the weighted regression of the nodes' posterior
+means on the inputs' standardised log values, scaled to sum to the between-node part: the
+shares and ``measurements`` sum to 1).
 """
 
 from __future__ import annotations

@@ -44,7 +44,8 @@ from .nuisance import (
 )
 from .screen import ScreenResult, hierarchical_screen
 
-__all__ = ["Identification", "identify", "default_inputs", "film_is_zero", "CARRIED_DRAWS"]
+__all__ = ["Identification", "identify", "default_inputs", "marginalised_inputs",
+           "film_is_zero", "CARRIED_DRAWS"]
 
 #: Draws of the earlier stages' posterior whose spread a later stage's likelihood carries.
 CARRIED_DRAWS = 6
@@ -144,7 +145,8 @@ def identify(measurements: Measurements, parametrisation: str = "gap", *,
         The inputs to marginalise (:mod:`itr_identify.inference.nuisance`; default
         :func:`default_inputs`: the conductivities of the matrix and every filler, and the
         film where the settings state none; ``{}`` or a zero sd holds an input at its
-        nominal value).
+        nominal value; a film prior is dropped under the per-area contact model, which has
+        no film).
     """
     if parametrisation not in PARAMETRISATIONS:
         raise ValueError(f"parametrisation: expected one of {sorted(PARAMETRISATIONS)}, got "
@@ -155,13 +157,10 @@ def identify(measurements: Measurements, parametrisation: str = "gap", *,
     singles = [f for f in comps if len(comps[f]) == 1]
     multis = [f for f in comps if len(comps[f]) > 1]
     faithful = settings.faithful if par.name == "gap" else None
-    priors = default_inputs(sorted({MATRIX, *(x for f in comps.values() for x in f)}),
-                            settings) if inputs is None else dict(inputs)
-    priors = {n: p for n, p in priors.items() if isinstance(p, FilmPrior) or p.rel_sd > 0}
+    priors = marginalised_inputs(
+        default_inputs(sorted({MATRIX, *(x for f in comps.values() for x in f)}), settings)
+        if inputs is None else inputs, contact=par.contact, settings=settings)
     film = any(isinstance(p, FilmPrior) for p in priors.values())
-    if film and not film_is_zero(settings):
-        raise ValueError("inputs: a film prior needs forward models built at film 0 (the "
-                         "settings state a film; hold it instead)")
     rounds: list[dict] = []
     t0 = time.perf_counter()
     models: dict[str, ForwardModel] = {}
@@ -246,6 +245,20 @@ def film_is_zero(settings: ForwardSettings) -> bool:
     rve = settings.rve
     film = rve.min_gap_um if rve.film_um is None else rve.film_um
     return film == 0
+
+
+def marginalised_inputs(inputs: Mapping[str, InputPrior | FilmPrior], *, contact: str,
+                        settings: ForwardSettings) -> dict[str, InputPrior | FilmPrior]:
+    """The inputs of ``inputs`` that are integrated out under the contact model ``contact``:
+    conductivities with a non-zero sd, and a film under the gap model only (the per-area
+    contact resistance holds no film). A film prior with models built at another film than
+    0 is a ValueError naming ``inputs``."""
+    out = {n: p for n, p in inputs.items()
+           if (contact == "gap" if isinstance(p, FilmPrior) else p.rel_sd > 0)}
+    if any(isinstance(p, FilmPrior) for p in out.values()) and not film_is_zero(settings):
+        raise ValueError("inputs: a film prior needs forward models built at film 0 (the "
+                         "settings state a film; hold it instead)")
+    return out
 
 
 def default_inputs(phases, settings: ForwardSettings) -> dict[str, InputPrior | FilmPrior]:
