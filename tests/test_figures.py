@@ -203,7 +203,7 @@ def test_posterior_markers_lie_inside_the_frame(tmp_path, captured):
               d2 / d2.sum()),
         stage(["Al2O3", "AlN"], ["Rff_Al2O3_AlN"], [a], d1 / d1.sum()),
         stage(["AlN"], [], None, None)])
-    ident = SimpleNamespace(parametrisation="area", posterior=post)
+    ident = SimpleNamespace(parametrisation="area", posterior=post, at_nominal=post)
     figures.posterior_figure(ident, tmp_path / "posterior_area.png")
     fig, = captured
     check_units_and_names(fig)

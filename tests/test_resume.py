@@ -122,8 +122,10 @@ def test_reproduce_geometry_is_built_once_per_rve(serial_reproduce):
     line = "engine: " + manifest["inputs"]["engine"]
     solved, earlier, builds = _engine_counts(line)
     # 12 formulations x 2 replicas, one contact model: one geometry per RVE (before the
-    # engine, every full solve of a replica built its own)
-    assert builds == 24 and solved > 3 * builds
+    # engine, every full solve of a replica built its own), and one per formulation for the
+    # film elasticity (the first replica's particles meeting at 2.5 nm: other contacts, so
+    # another discrete problem; issue 47's marginalised film, gap model only)
+    assert builds == 24 + 12 and solved > 3 * builds
     # a fresh folder: what the store answered repeated solves of this same run
     assert earlier == 0 and ", none from an earlier run, " in line
     assert re.search(r"full solves in this process \(\d+ requests repeated a solve of this "
@@ -138,7 +140,7 @@ def test_workers_and_an_external_scheduler_give_the_serial_numbers(serial_reprod
     out = tmp_path / "workers"
     assert main([*REPRODUCE, "--out", str(out), "--workers", "2"]) == 0
     solved, _, builds = _engine_counts(capsys.readouterr().out)
-    assert builds <= 24 * 2
+    assert builds <= (24 + 12) * 2
     assert_close(_strip(json.loads((out / "identified.json").read_text())), ref)
 
     sched_file = tmp_path / "scheduler.json"
