@@ -70,12 +70,17 @@ import numpy as np
 from itr_fv import Materials
 from itr_fv.checks import unknown_key
 from itr_fv.io import read_toml
-from itr_fv.materials import paper_data
-from itr_fv.materials.formulation_names import UnknownFormulationError, formulation_name
-from itr_fv.materials.paper_data import PAPER_SYSTEM, TABLE1
+from itr_fv.materials import default_system, is_default_system, paper_data
+from itr_fv.materials.formulation_names import (
+    UnknownFormulationError,
+    formulation_name,
+    fractions_of,
+)
+from itr_fv.materials.material_system import MaterialSystem
+from itr_fv.materials.parameters import parameter_name
 from itr_fv.rve import FillerSpec, packing_limit
 from itr_fv.rve.spec import RVESpec
-from itr_fv.solvers.choice import DEFAULT_SOLVER, check_solver
+from itr_fv.solvers.choice import check_solver, default_solver
 
 from . import design as designs
 
@@ -135,11 +140,11 @@ class Campaign:
     name: str = "campaign"
     replicas: int = 1
     contact: str = "gap"
-    solver: str = DEFAULT_SOLVER
+    solver: str = field(default_factory=default_solver)
     tol: float = 1e-6
     block_size: int = 8
     threads_per_worker: int = 1
-    matrix: str = PAPER_SYSTEM.matrix
+    matrix: str = field(default_factory=lambda: default_system().matrix)
     base: dict[str, float] = field(default_factory=dict)
 
     # the RVE's fields, read through (the specification holds and checks them)
@@ -153,21 +158,27 @@ class Campaign:
 
     # ------------------------------------------------------------------ reading
     @classmethod
-    def from_toml(cls, path: str | Path) -> "Campaign":
-        """Read and check a campaign file (CampaignError naming the file and key)."""
+    def from_toml(cls, path: str | Path, system: MaterialSystem | None = None) -> "Campaign":
+        """Read and check a campaign file (CampaignError naming the file and key); its
+        formulations, matrix, size distributions and base conductivities are those of
+        ``system`` (default: the package's, the paper's) where the file does not state
+        them."""
         p = Path(path)
         try:
             data = read_toml(p, "campaign file")
         except ValueError as exc:
             raise CampaignError(str(exc)) from None
         try:
-            return cls.from_dict(data)
+            return cls.from_dict(data, system)
         except CampaignError as exc:
             raise CampaignError(f"{p}: {exc}") from None
 
     @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> "Campaign":
-        """Build and check a campaign from the structure of the TOML file."""
+    def from_dict(cls, data: dict[str, Any],
+                  system: MaterialSystem | None = None) -> "Campaign":
+        """Build and check a campaign from the structure of the TOML file, in ``system``
+        (default: the package's)."""
+        system = system or default_system()
         if not isinstance(data, dict):
             raise CampaignError("expected a table of campaign keys")
         unknown = unknown_key(data, _TOP_KEYS)
@@ -182,10 +193,14 @@ class Campaign:
             rve = RVESpec(**{k: data[k] for k in _RVE_KEYS if k in data})
         except ValueError as exc:
             raise CampaignError(str(exc)) from None
-        camp = cls(formulations=tuple(_formulation(f, i)
+        scalars.setdefault("matrix", system.matrix)
+        # a campaign in another matrix (a stored one, read back by a worker) is complete
+        # in itself: nothing of the default system is added to its base
+        defaults = system_base(system) if scalars["matrix"] == system.matrix else {}
+        camp = cls(formulations=tuple(_formulation(f, i, system)
                                       for i, f in enumerate(_list(data["formulation"]))),
                    design=_design(data["design"]), rve=rve,
-                   base={**PAPER_BASE, **_base(data.get("base", {}))}, **scalars)
+                   base={**defaults, **_base(data.get("base", {}))}, **scalars)
         camp.check()
         return camp
 
@@ -341,7 +356,16 @@ def _base(table: Any) -> dict[str, float]:
     return out
 
 
-def _formulation(entry: Any, i: int) -> Formulation:
+def system_base(system: MaterialSystem) -> dict[str, float]:
+    """A campaign's base values in ``system``: its conductivities and known resistances;
+    the paper's system also the paper's Table 5 resistances (:data:`PAPER_BASE`)."""
+    if is_default_system(system):
+        return dict(PAPER_BASE)
+    out = {parameter_name("k", p): v for p, v in system.conductivities().items()}
+    return {**out, **dict(system.resistances)}
+
+
+def _formulation(entry: Any, i: int, system: MaterialSystem) -> Formulation:
     if not isinstance(entry, dict):
         raise CampaignError(f"formulation {i}: expected a table")
     unknown = unknown_key(entry, ("name", "fractions", "psd"))
@@ -351,17 +375,19 @@ def _formulation(entry: Any, i: int) -> Formulation:
     if not isinstance(name, str) or not _NAME.match(name):
         raise CampaignError(f"formulation {i}: name must be letters, digits and . + -, got "
                             f"{name!r}")
-    table2 = paper_data.formulations()
     if "fractions" in entry:
         fractions = entry["fractions"]
     else:
-        try:  # a Table 2 name in any letter case; a near miss gets a "did you mean"
-            name = formulation_name(name, known=table2)
+        try:  # a name of the system in any letter case; a near miss gets a "did you mean"
+            name = formulation_name(name, system=system)
+            fractions = fractions_of(name, system)
         except UnknownFormulationError as exc:
             hint = f"; did you mean {exc.suggestion!r}?" if exc.suggestion else ""
-            raise CampaignError(f"formulation {name!r}: no fractions given and not a Table 2 "
-                                f"formulation{hint} ({', '.join(table2)})") from None
-        fractions = table2[name]
+            named = ", ".join(system.named_formulations())
+            raise CampaignError(f"formulation {name!r}: no fractions given and not a "
+                                f"formulation of the system {system.name!r}{hint} "
+                                f"({named or 'name fillers by composition, e.g. '}"
+                                f"{'' if named else system.filler_names[0] + '-50'})") from None
     if not isinstance(fractions, dict) or not fractions:
         raise CampaignError(f"formulation {name!r}: fractions must be a table {{filler: "
                             "volume fraction}")
@@ -369,7 +395,8 @@ def _formulation(entry: Any, i: int) -> Formulation:
         if isinstance(v, bool) or not isinstance(v, (int, float)) or not 0 < v < 1:
             raise CampaignError(f"formulation {name!r}: fractions.{filler} must lie in (0, 1), "
                                 f"got {v!r}")
-    psd = {f: (TABLE1[f].mu, TABLE1[f].sigma) if f in TABLE1 else None for f in fractions}
+    sizes = {f.name: f.psd.to_number() for f in system.fillers}
+    psd = {f: (sizes[f].mu, sizes[f].sigma) if f in sizes else None for f in fractions}
     for filler, pair in entry.get("psd", {}).items():
         if filler not in fractions or not isinstance(pair, list) or len(pair) != 2:
             raise CampaignError(f"formulation {name!r}: psd.{filler} must be [mu, sigma] of a "
@@ -378,8 +405,8 @@ def _formulation(entry: Any, i: int) -> Formulation:
     missing = [f for f, p in psd.items() if p is None]
     if missing:
         raise CampaignError(f"formulation {name!r}: no size distribution for {missing[0]!r} "
-                            f"(Table 1 has {sorted(TABLE1)}; give psd.{missing[0]} = [mu, "
-                            "sigma])")
+                            f"(the system {system.name!r} has {sorted(sizes)}; give "
+                            f"psd.{missing[0]} = [mu, sigma])")
     return Formulation(name, {f: float(v) for f, v in fractions.items()},
                        {f: (float(p[0]), float(p[1])) for f, p in psd.items()})
 

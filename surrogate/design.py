@@ -27,7 +27,8 @@ from itr_fv.materials.parameters import is_log_scaled, parameter_name, parse_par
 __all__ = ["grid", "table4", "space_filling", "TABLE4_HYBRID_K"]
 
 #: Filler conductivities the paper fixes for the hybrids (W/(m K)).
-TABLE4_HYBRID_K = {f: paper_data.PAPER_CONDUCTIVITY[f] for f in ("Al2O3", "AlN")}
+TABLE4_HYBRID_K = {f: paper_data.paper_parameters()[parameter_name("k", f)]
+                   for f in ("Al2O3", "AlN")}
 
 
 def _check_names(names: Sequence[str], argument: str) -> None:

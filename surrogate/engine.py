@@ -57,8 +57,8 @@ from itr_fv.materials import Materials
 from itr_fv.rve.contact_film import ContactFilm
 from itr_fv.rve.microstructure import Microstructure
 from itr_fv.solvers.choice import (
-    DEFAULT_SOLVER,
     check_solver,
+    default_solver,
     needs_gpu,
     solver_backend,
     solver_choice,
@@ -161,7 +161,7 @@ class SolveRequest:
     tol : float
         Relative residual of the solve.
     solver : str
-        A resolved solver choice of :mod:`itr_fv.solvers.choice` (``DEFAULT_SOLVER`` by default).
+        A resolved solver choice of :mod:`itr_fv.solvers.choice` (its default by default).
     fields : bool
         Keep theta (the reduced basis's snapshots need it).
     labels : mapping
@@ -172,13 +172,13 @@ class SolveRequest:
     parameters: Mapping[str, float]
     contact: str
     tol: float
-    solver: str = DEFAULT_SOLVER
+    solver: str = field(default_factory=default_solver)
     fields: bool = False
     labels: Mapping[str, Any] = field(default_factory=dict)
 
     @classmethod
     def for_materials(cls, rve: RVEData, mat: Materials, tol: float, *,
-                      solver: str = DEFAULT_SOLVER, fields: bool = False,
+                      solver: str | None = None, fields: bool = False,
                       **labels: Any) -> SolveRequest:
         if mat.matrix != rve.matrix:
             raise ValueError(f"mat: matrix {mat.matrix!r} differs from the RVE's {rve.matrix!r}")
@@ -637,7 +637,7 @@ class SolveEngine:
         from itr_fv.solvers.resources import estimate_peak_memory
 
         # sized by the backend's name: the client may have no GPU (its workers do)
-        backend = solver_choice(solver or DEFAULT_SOLVER).backend
+        backend = solver_choice(solver).backend
         need = worker_memory_limit(estimate_peak_memory(shape, backend, store_fields=True))
         with self._lock:
             if self._client is None:

@@ -47,7 +47,7 @@ from itr_fv.discrete.problem import DiscreteProblem
 from itr_fv.io import atomic_path
 from itr_fv.materials import Materials
 from itr_fv.rve.microstructure import Microstructure
-from itr_fv.solvers.choice import DEFAULT_SOLVER, check_solver, solver_backend
+from itr_fv.solvers.choice import check_solver, solver_backend
 
 from .face_decomposition import (
     ConductanceInterpolation,
@@ -179,7 +179,7 @@ class ReducedBasis:
     def __init__(self, ms: Microstructure | DiscreteProblem, materials: Materials,
                  bounds: Mapping[str, tuple[float, float]], *, tol: float = 1e-3,
                  max_solves: int = 40, n_train: int = 256, seed: int = 0,
-                 solver: str = DEFAULT_SOLVER,
+                 solver: str | None = None,
                  solver_tol: float = 1e-9, interpolation_tol: float | None = None,
                  max_interpolation_terms: int = 120, progress: bool = False) -> None:
         self.ms = ms
@@ -189,7 +189,7 @@ class ReducedBasis:
         self.max_solves = max_solves
         self.n_train = n_train
         self.seed = seed
-        self.solver = solver
+        self.solver = check_solver(solver)
         self.solver_tol = solver_tol
         self.interpolation_tol = interpolation_tol
         self.max_interpolation_terms = max_interpolation_terms

@@ -28,7 +28,7 @@ from itr_fv.io import counted
 from itr_fv.rve import FillerSpec
 from itr_fv.rve.generate import size_cut
 from itr_fv.rve.spec import RVESpec
-from itr_fv.solvers.choice import solver_choice
+from itr_fv.solvers.choice import other_device_solver, solver_choice
 from itr_fv.solvers.resources import HEADROOM, available_memory, estimate_peak_memory
 
 from .engine import PROBLEM_BYTES_PER_VOXEL, PROBLEM_CACHE_BYTES, worker_memory_limit
@@ -262,6 +262,19 @@ class Workload:
                 f"about {_duration(self.seconds())} on {counted(cores, 'core')} (solver "
                 f"{self.solver}; an order of magnitude)")
         return "plan: " + "; ".join(parts) + f"; {mem}; {time}"
+
+    def alternatives(self) -> str:
+        """One line: what a CUDA device or a Dask scheduler would change (the same grids on
+        the ``gpu`` solver's measured speed; the solves spread over a cluster's workers)."""
+        on_gpu = solver_choice(self.solver).device == "cuda"
+        other = replace(self, solver=other_device_solver(self.solver), workers=None,
+                        scheduler=None)
+        where = (f"on the CPU (--device cpu, solver {other.solver})" if on_gpu
+                 else "on a CUDA device (--device cuda)")
+        serial = sum(g.seconds(self.solver) for g in self.grids)
+        return (f"  {where}: about {_duration(other.seconds())} (peak "
+                f"~{_gb(other.peak_bytes())}); with --scheduler ADDRESS the solves spread "
+                f"over its workers: about {_duration(serial / 8)} on 8 workers")
 
 
 def campaign_workload(campaign, *, workers: int | None = None,

@@ -7,6 +7,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from itr_fv.materials import default_system
 from itr_identify.inference.formulations import fractions_of
 
 #: Four single-filler formulations of each filler: two stages of one parameter each.
@@ -24,7 +25,7 @@ class StandInModel:
         self.rve_scatter = 0.01
         self.carried_scatter = 0.0
         self.model_sd = 0.0
-        self.settings = SimpleNamespace(prior_m2K_per_W=(1e-9, 1e-5))
+        self.settings = SimpleNamespace(prior_m2K_per_W=(1e-9, 1e-5), system=default_system())
 
     def predict(self, columns):
         k = 4.0 * self.phi

@@ -253,3 +253,79 @@ def test_pyproject_lists_every_package():
                     "itr_identify": ["data/*.csv", "data/*.json"]}
     assert {p.name for p in (ROOT / "itr_fv" / "data").glob("*.csv")} >= {
         "psd_lognormal.csv", "conductivities.csv", "measured_tc.csv"}
+
+
+# ------------------------------------------------------------------ one material system
+#: The names of the paper's material system (and its views) in itr_fv.materials.paper_data.
+PAPER_SYSTEM_NAMES = {"PAPER_SYSTEM", "PAPER_CONDUCTIVITY", "TABLE1"}
+
+
+def _names(path: Path) -> set[str]:
+    """Every name a module reads: bare names, attributes and imported names."""
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    out = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Name):
+            out.add(node.id)
+        elif isinstance(node, ast.Attribute):
+            out.add(node.attr)
+        elif isinstance(node, ast.ImportFrom):
+            out.update(alias.name for alias in node.names)
+    return out
+
+
+def test_only_the_materials_package_reads_the_paper_system():
+    """Every layer takes the material system from its settings: outside itr_fv.materials
+    no module reads the paper's system or its views; the default is made there, once
+    (itr_fv.materials.default_system), and the shipped measured defaults are tied to it
+    by is_default_system."""
+    materials = ROOT / "itr_fv" / "materials"
+    readers = []
+    for package in PACKAGES.values():
+        for f in sorted((ROOT / package).rglob("*.py")):
+            if materials in f.parents:
+                continue
+            hit = _names(f) & PAPER_SYSTEM_NAMES
+            if hit:
+                readers.append(f"{f.relative_to(ROOT)}: {sorted(hit)}")
+    assert readers == []
+    # and inside, the default's one maker reads it
+    init = (materials / "__init__.py").read_text(encoding="utf-8")
+    assert "def default_system" in init and "PAPER_SYSTEM" in init
+
+
+# --------------------------------------------------------------------- one solver choice
+def _string_constants(path: Path) -> set[str]:
+    """The string constants a module's code holds, docstrings left out."""
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    docs = set()
+    for node in ast.walk(tree):
+        if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)):
+            body = node.body
+            if body and isinstance(body[0], ast.Expr) and isinstance(body[0].value,
+                                                                     ast.Constant):
+                docs.add(id(body[0].value))
+    return {node.value for node in ast.walk(tree)
+            if isinstance(node, ast.Constant) and isinstance(node.value, str)
+            and id(node) not in docs}
+
+
+def test_only_the_backend_layer_names_a_solver():
+    """The solver is chosen in itr_fv.solvers.choice: outside the backend layer
+    (itr_fv/solvers and the backends of itr_fft) no module reads DEFAULT_SOLVER or spells
+    a registered solver's name; settings take the default from choice.default_solver and
+    carry the resolved name they are given."""
+    from itr_fv.solvers.choice import SOLVERS
+
+    backend_layer = [ROOT / "itr_fv" / "solvers", ROOT / "itr_fft"]
+    readers = []
+    for package in PACKAGES.values():
+        for f in sorted((ROOT / package).rglob("*.py")):
+            if any(layer in f.parents for layer in backend_layer):
+                continue
+            if "DEFAULT_SOLVER" in _names(f):
+                readers.append(f"{f.relative_to(ROOT)}: DEFAULT_SOLVER")
+            named = _string_constants(f) & set(SOLVERS)
+            if named:
+                readers.append(f"{f.relative_to(ROOT)}: {sorted(named)}")
+    assert readers == []

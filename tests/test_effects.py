@@ -6,6 +6,7 @@ import math
 import numpy as np
 import pytest
 
+from itr_fv.materials import default_system
 from itr_fv.rve.spec import RVESpec
 from itr_identify.discrepancy import effects as fx
 from itr_identify.discrepancy.effects import (
@@ -118,7 +119,7 @@ def test_measurement_table_reads_an_optional_thickness(tmp_path):
                  "Al2O3-55,4,1.31,1.5\n")
     m = read_measurements(p, formulations=fractions_of)
     assert np.allclose(m.thickness_m["Al2O3-55"], [5e-4, 5e-4, 1.5e-3, 1.5e-3])
-    g = groups_of(m, {"Al2O3-55": {"Al2O3": 0.55}})
+    g = groups_of(m, {"Al2O3-55": {"Al2O3": 0.55}}, system=default_system())
     assert [x.thickness_m for x in g] == [5e-4, 1.5e-3]
     assert g[0].mean == pytest.approx(1.21) and g[1].mean == pytest.approx(1.305)
     # relative scatter about the thickness means, 2 degrees of freedom
@@ -136,11 +137,11 @@ def test_groups_pool_the_relative_scatter_of_a_filler():
                       "Al2O3-29-AlN-29": np.array([2, 2.1])}, "t")
     comp = {"Al2O3-55": {"Al2O3": 0.55}, "Al2O3-60": {"Al2O3": 0.6},
             "Al2O3-29-AlN-29": {"Al2O3": 0.29, "AlN": 0.29}}
-    g = groups_of(m, comp, pool=False)
+    g = groups_of(m, comp, system=default_system(), pool=False)
     assert [x.formulation for x in g] == ["Al2O3-55", "Al2O3-60"]     # two fillers: left out
     assert g[0] == Group("Al2O3-55", "Al2O3", 0.55, None, 1.25, g[0].standard_error, 2)
     assert g[0].standard_error == pytest.approx(0.05)              # sd 0.0707 / sqrt(2)
-    pooled = groups_of(m, comp)
+    pooled = groups_of(m, comp, system=default_system())
     ss = 2 * (0.05 / 1.25) ** 2 + 2 * (0.1 / 1.6) ** 2 + (0.2 / 1.6) ** 2
     rel = math.sqrt(ss / 3)
     assert pooled[0].standard_error == pytest.approx(rel * 1.25 / math.sqrt(2))

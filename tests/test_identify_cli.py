@@ -54,7 +54,7 @@ def test_identify_writes_identified_json(tmp_path, capsys):
     ("formulation,replicate\nAl2O3-55,1\n", "k_W_per_mK"),
     ("formulation,replicate,k_W_per_mK\nAl2O3-55,1,-1.2\nAl2O3-55,2,1.3\n", "line 2"),
     ("formulation,replicate,k_W_per_mK\nSiC-50,1,1.2\nSiC-50,2,1.3\n",
-     "formulation 'SiC-50': expected a Table 2 name"),
+     "formulation 'SiC-50': SiC is not a filler of the material system 'paper'"),
     ("formulation,replicate,k_W_per_mK\nAl2O3-55,1,1.2\n", "replicate"),
     ("formulation,replicate,k_W_per_mK\nAl2O3-55,1,nan\nAl2O3-55,2,1.3\n", "k_W_per_mK"),
 ])

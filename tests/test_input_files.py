@@ -4,6 +4,7 @@ miss (O for 0, l or I for 1) refused with a "did you mean", in one line, on the 
 with exit status 2."""
 
 import os
+import re
 import subprocess
 import sys
 
@@ -86,8 +87,11 @@ def test_a_near_miss_is_refused_with_did_you_mean(tmp_path, name, suggestion, wh
 
 
 def test_no_suggestion_where_nothing_is_near():
-    for name in ("SiC-50", "Al2O3-80", "x"):
-        with pytest.raises(ValueError, match="expected a Table 2 name") as info:
+    for name, why in (("SiC-50", "SiC is not a filler of the material system 'paper' "
+                                  "(fillers: Al2O3, AlN)"),
+                      ("Al2O3-80", "80 vol% of filler in all; expected"),
+                      ("x", "expected a named formulation or <filler>-<vol%>")):
+        with pytest.raises(ValueError, match=re.escape(f"formulation {name!r}: {why}")) as info:
             formulation_name(name)
         assert "did you mean" not in str(info.value)
     with pytest.raises(ValueError, match="looks like a volume fraction"):

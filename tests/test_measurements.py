@@ -64,7 +64,7 @@ BAD = [
     ("table", TABLE + "Al2O3-60,1,nan\nAl2O3-60,2,1.5\n", "line 2: k_W_per_mK must be"),
     ("table", TABLE + "Al2O3-60,1,abc\n", "is not a number: 'abc'"),
     ("table", TABLE + "SiC-61,1,1.5\nSiC-61,2,1.6\n",
-     "line 2: formulation 'SiC-61': expected a Table 2 name"),
+     "line 2: formulation 'SiC-61': SiC is not a filler of the material system"),
     ("table", TABLE + "Al2O3-60,1,1.5\n", "has 1 replicate"),
     ("table", TABLE + "Al2O3-60,1,1.5\nAl2O3-60,1,1.6\n", "given twice"),
     ("table", TABLE, "no data rows"),

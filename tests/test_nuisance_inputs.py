@@ -16,6 +16,7 @@ import warnings
 import numpy as np
 import pytest
 
+from itr_fv.materials import default_system
 from itr_identify.inference.calibrate import calibrate
 from itr_identify.inference.formulations import fractions_of
 from itr_identify.inference.measurements import Measurements
@@ -50,7 +51,7 @@ def measured(models, lam=1.0):
 
 
 def priors(sd_matrix=0.10, sd_filler=0.2):
-    pr = default_priors(["silicone", "Al2O3", "AlN"])
+    pr = default_priors(["silicone", "Al2O3", "AlN"], default_system())
     return {n: InputPrior(n, p.nominal, sd_matrix if n == "k_silicone" else sd_filler)
             for n, p in pr.items()}
 

@@ -15,6 +15,7 @@ import pytest
 from itr_fv import Microstructure
 from itr_fv.analytic import hashin_shtrikman, hashin_shtrikman_multiphase
 from itr_fv.checks import slip_hint, unit_slip
+from itr_fv.materials import default_system
 from itr_fv.materials.material_system import check_density
 from itr_fv.rve.spec import RVESpec
 from itr_identify.cli import main
@@ -28,6 +29,8 @@ from itr_identify.inference.plausibility import (
 TABLE = "formulation,replicate,k_W_per_mK\n"
 QUICK = ["--box-um", "12", "--voxel-um", "0.5", "--replicas", "2", "--no-progress",
          "--fidelity", "quick"]
+
+PAPER = default_system()
 
 
 def _one_line_refusal(capsys, argv, expected, out=None):
@@ -61,7 +64,7 @@ def test_multiphase_bounds_are_the_two_phase_bounds_and_order_the_phases():
 
 
 def test_the_reachable_range_is_the_matrix_and_the_perfect_interface_bound():
-    k_m, k_up = conductivity_range("Al2O3-60")
+    k_m, k_up = conductivity_range("Al2O3-60", PAPER)
     # HS upper bound for 60 vol% of 30 W/(m K) in 0.18 W/(m K), by hand
     by_hand = 1.0 / (0.4 / (0.18 + 60.0) + 0.6 / (30.0 + 60.0)) - 60.0
     assert k_m == 0.18 and k_up == pytest.approx(by_hand, rel=1e-12)
@@ -69,7 +72,7 @@ def test_the_reachable_range_is_the_matrix_and_the_perfect_interface_bound():
     # every measured value of Table 3 lies inside its formulation's range
     m = read_measurements()
     for f in m.formulations:
-        lo, hi = conductivity_range(f)
+        lo, hi = conductivity_range(f, PAPER)
         assert np.all((m.values[f] > lo) & (m.values[f] < hi))
 
 
@@ -87,7 +90,7 @@ def test_a_filler_like_conductivity_is_refused_with_the_range_and_no_unit_hint(t
     # 25 W/(m K) is above what Al2O3-60 can reach, but 25 mW/(m K) is below its matrix: no
     # unit slip explains it, so the message states the range instead of asking about mW
     csv = _write(tmp_path / "k25.csv", TABLE + "Al2O3-60,1,25\nAl2O3-60,2,24\n")
-    lo, hi = conductivity_range("Al2O3-60")
+    lo, hi = conductivity_range("Al2O3-60", PAPER)
     with pytest.raises(ValueError) as err:
         read_measurements(csv)
     assert str(err.value) == (
@@ -118,7 +121,7 @@ def test_a_unit_hint_only_where_the_unit_makes_the_value_plausible():
 
 def test_k_above_the_bound_of_a_hybrid_is_refused(tmp_path):
     csv = tmp_path / "h.csv"
-    bound = conductivity_range("Al2O3-30-AlN-30")[1]
+    bound = conductivity_range("Al2O3-30-AlN-30", PAPER)[1]
     csv.write_text(TABLE + f"Al2O3-30-AlN-30,1,1.7\nAl2O3-30-AlN-30,2,{1.01 * bound:.4f}\n")
     with pytest.raises(ValueError, match=r"line 3: k_W_per_mK .* W/\(m K\) is above .*; a "
                                          r"sample of Al2O3-30-AlN-30 can conduct 0.18 - "):
@@ -134,7 +137,7 @@ def test_k_below_the_matrix_is_one_warning_line_before_anything_else(tmp_path, c
     assert lines[0].startswith("itr: warning: low.csv line 2: k_W_per_mK 0.15")
     assert "below the matrix's own 0.18 W/(m K)" in lines[0]
     assert lines[0].endswith(f"reach it; a sample of Al2O3-55 can conduct 0.18 - "
-                             f"{conductivity_range('Al2O3-55')[1]:.3g} W/(m K)")
+                             f"{conductivity_range('Al2O3-55', PAPER)[1]:.3g} W/(m K)")
     with pytest.warns(ImplausibleMeasurementWarning, match="line 3"):
         read_measurements(_write(tmp_path / "l2.csv", TABLE + "AlN-55,1,1.2\nAlN-55,2,0.1\n"))
 

@@ -175,7 +175,8 @@ def test_shipped_corrections_apply_only_to_the_cheap_rve_they_were_made_for():
     assert 1.0 < c[0] < 1.5 and 0 < u[0] < 0.05  # the cheap 12 um box reads AlN low
     other = default.with_(box_um=16.0)
     fac, note = shipped_factor(other, gap, {"AlN": 0.60})
-    assert fac is None and "default cheap RVE" in note
+    assert fac is None and note == ("the corrections correct a 12 um cheap RVE at 0.25 um, "
+                                    "not this one (16 um at 0.25 um)")
     fac, note = shipped_factor(default.with_(psd_basis="volume"), gap, {"AlN": 0.60})
     assert fac is None and "number-weighted" in note
     fac, note = shipped_factor(default, gap, {"Al2O3": 0.40, "AlN": 0.20})

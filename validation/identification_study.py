@@ -58,7 +58,8 @@ def truth_set(par: str, settings, j: int) -> dict[str, float]:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             mat = m.materials({p: v for p, v in TRUE[par].items()
-                               if p in m.parametrisation.parameters(list(m.fractions))})
+                               if p in m.parametrisation.parameters(list(m.fractions),
+                                                            matrix=m.settings.system.matrix)})
             ks = [full_solve(m.pack(r), mat, settings.solver_tol).mean() for r in range(3)]
         out[f] = float(np.mean(ks))
     return out

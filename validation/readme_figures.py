@@ -8,8 +8,9 @@ counts in ``validation/results/readme_figures.json``. ``python validation/readme
 write`` puts those numbers into README.md between the markers ``<!-- readme-figures -->``
 and ``<!-- /readme-figures -->``, and the figures of the result files the README quotes for
 issue 47 (the shipped data's headline, the box study, the contact films, the recovery)
-between ``<!-- result-figures -->`` and ``<!-- /result-figures -->``; nothing there is
-typed by hand. ``all`` does both.
+between ``<!-- result-figures -->`` and ``<!-- /result-figures -->``, and those of issue 48
+(the paper's system as a file, the second system) between ``<!-- system-figures -->`` and
+``<!-- /system-figures -->``; nothing there is typed by hand. ``all`` does both.
 Options: ``--skip-tests`` (keep the recorded test figures), ``--skip-reproduce``.
 """
 
@@ -36,6 +37,7 @@ RESULTS = ROOT / "validation" / "results" / "readme_figures.json"
 README = ROOT / "README.md"
 BEGIN, END = "<!-- readme-figures -->", "<!-- /readme-figures -->"
 RESULTS_BEGIN, RESULTS_END = "<!-- result-figures -->", "<!-- /result-figures -->"
+SYSTEM_BEGIN, SYSTEM_END = "<!-- system-figures -->", "<!-- /system-figures -->"
 ITR = [sys.executable, "-m", "itr_identify.cli"]
 
 
@@ -227,6 +229,36 @@ def results_block() -> str:
     return " ".join(parts) + " Written by `validation/readme_figures.py` from those files."
 
 
+def system_block() -> str:
+    """The README's figures of issue 48: the paper's system as a file against the default
+    (``paper_system_file.json``) and the second system end to end (``second_system.json``)."""
+    parts = []
+    same = _json("paper_system_file.json")
+    if same:
+        parts.append(
+            "with `--system examples/paper/system.toml`, `itr identify --example` gives the "
+            f"default's identified.json: {same['numbers_compared']} numbers, largest relative "
+            f"difference {same['largest_relative_difference']:.2g}"
+            + ("" if same["passes"] else f" ({len(same['differences'])} leaves DIFFER)")
+            + " (`validation/results/paper_system_file.md`).")
+    second = _json("second_system.json")
+    if second:
+        rows = []
+        for name, r in second["runs"].items():
+            e = r["parameters"].get("gap")
+            if e:
+                lo, hi = e["interval_90"]
+                rows.append(f"{name}: {r['wall_s'] / 60:.1f} min, R_ZnO_epoxy 90 % "
+                            f"{lo:.2e} - {hi:.2e} ({e['flag']}; "
+                            f"{'holds' if e['holds_truth'] else 'MISSES'} the truth "
+                            f"{second['truth_R_ZnO_epoxy']:.0e})")
+        parts.append(f"ZnO in epoxy on {second['machine']} (`validation/results/"
+                     f"second_system.md`, gap parametrisation): " + "; ".join(rows)
+                     + f"; building the system's corrections table took "
+                     f"{second['corrections_build_s'] / 60:.1f} min.")
+    return " ".join(parts) + " Written by `validation/readme_figures.py` from those files."
+
+
 def _replace(path: Path, begin: str, end: str, text: str) -> None:
     doc = path.read_text()
     if begin not in doc or end not in doc:
@@ -240,6 +272,7 @@ def _replace(path: Path, begin: str, end: str, text: str) -> None:
 def write(data: dict) -> None:
     _replace(README, BEGIN, END, block(data))
     _replace(README, RESULTS_BEGIN, RESULTS_END, results_block())
+    _replace(README, SYSTEM_BEGIN, SYSTEM_END, system_block())
 
 
 def main() -> None:

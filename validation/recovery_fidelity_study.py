@@ -48,7 +48,7 @@ def truth_k(filler: str, engine) -> dict[str, dict]:
     from itr_fv.rve import FillerSpec, build_rve
     from itr_fv.rve.spec import RVESpec
     from itr_identify.forward.fidelity import BIAS_ORDER, richardson
-    from itr_identify.forward.model import MATRIX, PARAMETRISATIONS, ForwardModel, ForwardSettings
+    from itr_identify.forward.model import PARAMETRISATIONS, ForwardModel, ForwardSettings
     from itr_identify.inference.formulations import fractions_of
     from itr_surrogate.engine import RVEData, SolveRequest
 
@@ -63,7 +63,7 @@ def truth_k(filler: str, engine) -> dict[str, dict]:
         requests, seeds = [], []
         for j in range(TRUTH_PACKINGS):
             fillers = [FillerSpec.from_table1(m, v) for m, v in comp.items()]
-            ms, seed = build_rve(spec, fillers, j, matrix=MATRIX, warn_box_cut=False)
+            ms, seed = build_rve(spec, fillers, j, matrix="silicone", warn_box_cut=False)
             seeds.append(seed)
             rve = RVEData.of(ms)
             for grid in (rve, replace(rve, shape=(n_coarse,) * 3)):

@@ -11,7 +11,17 @@ import argparse
 from dataclasses import replace
 from pathlib import Path
 
-from .core import CLIError, Parser, number, open_campaign, planned, solver_arguments, solver_option
+from .core import (
+    CLIError,
+    Parser,
+    number,
+    open_campaign,
+    planned,
+    solver_arguments,
+    solver_option,
+    system_arguments,
+    system_option,
+)
 
 __all__ = ["add_parser"]
 
@@ -23,7 +33,7 @@ def _run(args: argparse.Namespace) -> int:
     from itr_surrogate.workload import campaign_workload
 
     try:
-        camp = Campaign.from_toml(args.file)
+        camp = Campaign.from_toml(args.file, system_option(args))
     except CampaignError as exc:
         raise CLIError(str(exc), 2) from None
     solver = solver_option(args, camp.solver)
@@ -82,6 +92,7 @@ def add_parser(sub) -> None:
                      help="address of a running Dask scheduler, e.g. tcp://host:8786")
     solver_arguments(run)
     run.add_argument("--no-progress", action="store_true", help="no progress bar")
+    system_arguments(run)
     run.set_defaults(func=_run)
     status = actions.add_parser("status", help="done / total and failures of a campaign")
     status.add_argument("dir", help="campaign folder")

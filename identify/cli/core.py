@@ -27,7 +27,8 @@ __all__ = ["CLIError", "Parser", "number", "FLAG_NAMES", "flagged", "output_fold
            "identification_plan",
            "engine_arguments", "engine_options", "solver_arguments", "solver_option",
            "open_campaign", "rve_arguments", "forward_settings", "read_table",
-           "identification_arguments", "reproduce_settings"]
+           "identification_arguments", "reproduce_settings", "system_arguments",
+           "system_option"]
 
 #: Library argument names as the command line spells them, for error messages.
 FLAG_NAMES = {"box_um": "--box-um", "voxel_um": "--voxel-um", "volume_fraction": "--fraction",
@@ -123,6 +124,7 @@ def output_folder(path: str, job: str, *, folders: Sequence[str] = (),
                                        if folders else ""), file=sys.stderr)
     if workload is not None:
         print(workload.summary())
+        print(workload.alternatives())
     try:
         yield out
     except BaseException:
@@ -160,8 +162,9 @@ def identification_plan(args: argparse.Namespace, settings, formulations, *,
     from ..forward.workload import identification_workload
     from ..inference.formulations import fractions_of
 
+    system = settings.forward.system
     return identification_workload(
-        settings.forward, {f: fractions_of(f) for f in formulations},
+        settings.forward, {f: fractions_of(f, system) for f in formulations},
         settings.parametrisations, validation=validation, workers=args.workers,
         scheduler=args.scheduler)
 
@@ -231,13 +234,12 @@ def forward_settings(fw, args: argparse.Namespace):
         raise CLIError(msg, 2) from None
 
 
-def read_table(path: str | None, reader: Callable):
-    """``reader(path)`` with formulations named by composition; a bad file is a CLIError
-    (status 2) naming MEASUREMENTS."""
-    from ..inference.formulations import fractions_of
-
+def read_table(path: str | None, reader: Callable, system=None):
+    """``reader(path)`` with formulations named by composition in ``system`` (a
+    MaterialSystem; default the package's); a bad file is a CLIError (status 2) naming
+    MEASUREMENTS."""
     try:
-        return reader(path, formulations=fractions_of)
+        return reader(path, system=system)
     except ValueError as exc:
         msg = str(exc)
         raise CLIError("MEASUREMENTS: " + (msg[len("path: "):] if msg.startswith("path: ")
@@ -282,9 +284,9 @@ def engine_arguments(p: argparse.ArgumentParser) -> None:
     """--workers N and --scheduler ADDRESS: where the full solves run; --store DIR: where
     they are kept (read by :func:`engine_options`); --solver and --device: what solves
     (:func:`solver_arguments`)."""
-    from itr_fv.solvers.choice import DEFAULT_SOLVER
+    from itr_fv.solvers.choice import default_solver
 
-    solver_arguments(p, default=DEFAULT_SOLVER)
+    solver_arguments(p, default=default_solver())
     p.add_argument("--workers", type=number(int, 1, 64, hi_open=False), default=None,
                    help="run the full solves on a local Dask cluster of N processes "
                    "(default: in this process, the fastest on 2 cores)")
@@ -319,7 +321,8 @@ def identification_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--parametrisation", choices=["area", "gap", "both"], default="both",
                    help="area (the paper's per-area contact resistance), gap (physical "
                    "contacts) or both (default)")
-    rve_arguments(p, box="12", voxel="0.25")
+    rve_arguments(p, box="the system's powders': 12 for the paper's",
+                  voxel="the system's powders': 0.25 for the paper's")
     p.add_argument("--fidelity", choices=["shipped", "quick", "standard", "paper"],
                    default=None,
                    help="how the gap parametrisation's models are corrected: shipped "
@@ -330,24 +333,22 @@ def identification_arguments(p: argparse.ArgumentParser) -> None:
                    "cores), paper (40 um boxes at 0.1 and 0.125 um; hours)")
     p.add_argument("--conductivity-sd", action="append", default=[], metavar="PHASE=SD",
                    help="relative standard deviation of a phase's conductivity, "
-                   "marginalised in the intervals (defaults: silicone 0.10, Al2O3 0.15, AlN "
-                   "0.25; e.g. silicone=0.02 for a measured matrix, 0 to hold it at the "
-                   "paper's value); repeat per phase")
+                   "marginalised in the intervals (defaults: the material system's; the "
+                   "paper's silicone 0.10, Al2O3 0.15, AlN 0.25; e.g. silicone=0.02 for a "
+                   "measured matrix, 0 to hold it at its nominal value); repeat per phase")
     engine_arguments(p)
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
 
 
-def conductivity_sds(args: argparse.Namespace) -> dict[str, float]:
-    """``--conductivity-sd PHASE=SD`` as {phase: sd}; a bad one is a CLIError naming the
-    flag."""
-    from ..inference.nuisance import DEFAULT_SD
-
+def conductivity_sds(args: argparse.Namespace, system) -> dict[str, float]:
+    """``--conductivity-sd PHASE=SD`` as {phase: sd} for the phases of ``system``; a bad
+    one is a CLIError naming the flag."""
     out = {}
     for item in getattr(args, "conductivity_sd", []) or []:
         phase, _, value = item.partition("=")
-        if phase not in DEFAULT_SD:
+        if phase not in system.phases:
             raise CLIError(f"--conductivity-sd: unknown phase {phase!r} (known: "
-                           f"{', '.join(sorted(DEFAULT_SD))})", 2)
+                           f"{', '.join(sorted(system.phases))})", 2)
         try:
             sd = float(value)
         except ValueError:
@@ -363,9 +364,59 @@ def reproduce_settings(args: argparse.Namespace):
     """The ReproduceSettings of ``itr reproduce`` and ``itr identify`` from their flags."""
     from ..workflows.reproduce import DEFAULT_FIDELITY, ReproduceSettings
 
-    base = ReproduceSettings.at_fidelity(args.fidelity or DEFAULT_FIDELITY)
+    base = ReproduceSettings.at_fidelity(args.fidelity or DEFAULT_FIDELITY,
+                                         system_option(args))
     fw = forward_settings(base.forward, args)
+    corrections = getattr(args, "corrections", None)
+    if corrections is not None:
+        fw = fw.with_(faithful=_with_corrections(fw, corrections))
     pars = ("area", "gap") if args.parametrisation == "both" else (args.parametrisation,)
+    sds = conductivity_sds(args, fw.system)
     return ReproduceSettings(forward=fw, parametrisations=pars,
                              leave_one_out=not getattr(args, "no_leave_one_out", False),
-                             conductivity_sd=tuple(sorted(conductivity_sds(args).items())))
+                             conductivity_sd=tuple(sorted(sds.items())))
+
+
+def _with_corrections(fw, path: str):
+    """The settings' fidelity level reading the corrections file ``path``; a CLIError
+    (status 2) naming --corrections for a level without tabled corrections or a file that
+    is none, or that holds for another system or cheap RVE."""
+    from dataclasses import replace
+
+    from ..forward.shipped import ShippedCorrections
+
+    fa = fw.faithful
+    if fa is None or not fa.shipped:
+        raise CLIError("--corrections: a corrections file is used at --fidelity shipped "
+                       "(the default), not at this level", 2)
+    try:
+        why = ShippedCorrections.load(path, argument="--corrections").why_not_for(
+            fw.system, fw.rve)
+    except ValueError as exc:
+        raise CLIError(str(exc), 2) from None
+    if why:
+        raise CLIError(f"--corrections: {path}: {why}", 2)
+    return replace(fa, corrections=str(path))
+
+
+def system_arguments(p: argparse.ArgumentParser) -> None:
+    """--system FILE: the material system (read by :func:`system_option`)."""
+    p.add_argument("--system", default=None, metavar="FILE",
+                   help="material-system file (TOML: the matrix and fillers, their "
+                   "conductivities, densities and size distributions; examples/*/system.toml; "
+                   "`itr materials` lists the phases it may name without a value) "
+                   "(default: the paper's system, examples/paper/system.toml)")
+
+
+def system_option(args: argparse.Namespace):
+    """The MaterialSystem of --system (None where not given); a bad file is a CLIError
+    (status 2) in one line naming the flag, the file and the key."""
+    path = getattr(args, "system", None)
+    if path is None:
+        return None
+    from itr_fv.materials.system_file import read_system
+
+    try:
+        return read_system(path)
+    except ValueError as exc:
+        raise CLIError(f"--system: {exc}", 2) from None

@@ -19,6 +19,8 @@ from .core import (
     output_folder,
     solver_arguments,
     solver_option,
+    system_arguments,
+    system_option,
 )
 
 __all__ = ["add_parser"]
@@ -35,7 +37,7 @@ def _build(args: argparse.Namespace) -> int:
     from ..forward.shipped import assemble
 
     try:
-        plan = CorrectionPlan.from_toml(args.file)
+        plan = CorrectionPlan.from_toml(args.file, system_option(args))
         systems = tuple(args.systems.split(",")) if args.systems else None
         if systems:
             for s in systems:
@@ -111,6 +113,7 @@ def add_parser(sub) -> None:
     build.add_argument("--scheduler", default=None,
                        help="address of a running Dask scheduler, e.g. tcp://host:8786")
     solver_arguments(build)
+    system_arguments(build)
     build.add_argument("--no-progress", action="store_true", help="no progress bar")
     build.set_defaults(func=_build)
     show = actions.add_parser("show", help="print a corrections table")

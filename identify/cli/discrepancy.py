@@ -13,6 +13,8 @@ from .core import (
     output_folder,
     read_table,
     rve_arguments,
+    system_arguments,
+    system_option,
 )
 
 __all__ = ["add_parser"]
@@ -23,29 +25,32 @@ def _run(args: argparse.Namespace) -> int:
     from ..discrepancy.observables import auxiliary_groups
     from ..discrepancy.settings import DiscrepancySettings
     from ..discrepancy.tables import n_solves
-    from ..forward.fidelity import faithful_for
+    from ..forward.fidelity import cheap_rve_for, faithful_for
     from ..forward.workload import tables_workload
     from ..inference.formulations import fractions_of
     from ..inference.measurements import read_measurements
     from ..workflows.discrepancy import run_discrepancy
 
-    system = _system(args.density)
-    meas = read_table(args.measurements,
-                      lambda path, **kw: read_measurements(path, system=system, **kw))
-
-    settings = DiscrepancySettings(
-        forward=forward_settings(DiscrepancySettings().forward, args),
-        faithful=faithful_for(args.fidelity), system=system)
+    stated = system_option(args)
+    base = DiscrepancySettings().forward
+    if stated is not None:
+        base = base.with_(system=stated, rve=cheap_rve_for(stated))
+    system = _with_densities(base.system, args.density)
+    meas = read_table(args.measurements, read_measurements, system)
+    forward = forward_settings(base.with_(system=system), args)
+    settings = DiscrepancySettings(forward=forward,
+                                   faithful=faithful_for(args.fidelity, system))
     try:
-        effects = by_key(args.effects.split(",")) if args.effects else default_effects()
+        effects = (by_key(args.effects.split(","), system) if args.effects
+                   else default_effects(system))
     except ValueError as exc:
         raise CLIError("--" + str(exc), 2) from None
+    comps = {f: fractions_of(f, system) for f in meas.formulations}
     try:
-        auxiliary_groups(meas, {f: fractions_of(f) for f in meas.formulations})
+        auxiliary_groups(meas, comps)
     except ValueError as exc:
         raise CLIError("MEASUREMENTS: " + str(exc).removeprefix("measurements: "), 2) from None
-    singles = {f: c for f, c in ((f, fractions_of(f)) for f in meas.formulations)
-               if len(c) == 1}
+    singles = {f: c for f, c in comps.items() if len(c) == 1}
     plan = tables_workload(settings, singles, solves=n_solves(len(singles), settings, effects),
                            workers=args.workers, scheduler=args.scheduler)
     with output_folder(args.out, "discrepancy", folders=("solves",), workload=plan) as out:
@@ -54,13 +59,11 @@ def _run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _system(pairs: list[str] | None):
-    """The paper's material system with the ``--density PHASE=G_PER_CM3`` overrides; a bad
-    one is a one-line error naming the option."""
-    from itr_fv.materials.paper_data import PAPER_SYSTEM
-
+def _with_densities(system, pairs: list[str] | None):
+    """``system`` with the ``--density PHASE=G_PER_CM3`` overrides; a bad one is a one-line
+    error naming the option."""
     if not pairs:
-        return PAPER_SYSTEM
+        return system
     values = {}
     for pair in pairs:
         phase, sep, text = pair.partition("=")
@@ -72,7 +75,7 @@ def _system(pairs: list[str] | None):
             raise CLIError(f"--density: expected PHASE=G_PER_CM3 (e.g. Al2O3=3.98), got "
                            f"{pair!r}", 2) from None
     try:
-        return PAPER_SYSTEM.with_densities(values)
+        return system.with_densities(values)
     except ValueError as exc:
         raise CLIError(f"--density: {exc}", 2) from None
 
@@ -116,5 +119,6 @@ def add_parser(sub) -> None:
                    help="comma-separated candidates (default all): matrix, filler, porosity, "
                    "fraction, spots, tester, batch, film, agglomeration, basis, shell")
     engine_arguments(p)
+    system_arguments(p)
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
     p.set_defaults(func=_run)

@@ -12,7 +12,16 @@ import sys
 import traceback
 import warnings
 
-from . import campaign, corrections, demo, discrepancy, identify, reproduce, surrogate
+from . import (
+    campaign,
+    corrections,
+    demo,
+    discrepancy,
+    identify,
+    materials,
+    reproduce,
+    surrogate,
+)
 from .core import CLIError, Parser, flagged
 
 __all__ = ["main", "build_parser"]
@@ -27,7 +36,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version",
                         version=f"itr {__version__} (Python {sys.version.split()[0]})")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=Parser)
-    for command in (demo, campaign, corrections, surrogate, reproduce, identify, discrepancy):
+    for command in (demo, campaign, corrections, surrogate, reproduce, identify, discrepancy,
+                    materials):
         command.add_parser(sub)
     return parser
 

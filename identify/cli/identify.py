@@ -11,7 +11,9 @@ from .core import (
     identification_plan,
     output_folder,
     read_table,
+    refuse_unfit,
     reproduce_settings,
+    system_arguments,
 )
 
 __all__ = ["add_parser"]
@@ -29,8 +31,16 @@ def _run(args: argparse.Namespace) -> int:
         raise CLIError("--readings: the shipped Table 3 (--example) holds conductivities, not "
                        "tester readings", 2)
     meas = read_table(args.measurements,
-                      read_tester_readings if args.readings else read_measurements)
+                      read_tester_readings if args.readings else read_measurements,
+                      settings.forward.system)
     plan = identification_plan(args, settings, meas.formulations, validation=False)
+    if args.plan:
+        refuse_unfit(plan)
+        print(_system_line(settings.forward))
+        print(plan.summary())
+        print(plan.alternatives())
+        return 0
+    print(_system_line(settings.forward))
     with output_folder(args.out, "identify", folders=("solves",), workload=plan) as out:
         run_identify(meas, settings, out, progress=not args.no_progress,
                      **engine_options(args))
@@ -55,4 +65,24 @@ def add_parser(sub) -> None:
     ide.add_argument("--out", default="itr-identify", help="output folder "
                      "(default itr-identify)")
     identification_arguments(ide)
+    system_arguments(ide)
+    ide.add_argument("--corrections", default=None, metavar="FILE",
+                     help="a corrections table built for this system (itr corrections build "
+                     "PLAN --system FILE; its corrections.json): used where it holds, the "
+                     "other formulations corrected at runtime (default: the tables shipped "
+                     "with the package, for the paper's system)")
+    ide.add_argument("--plan", action="store_true",
+                     help="print the plan (RVEs, voxels per solve, solves, memory, time here "
+                     "and on a GPU or a cluster) and stop, before any packing or solving")
     ide.set_defaults(func=_run)
+
+
+def _system_line(forward) -> str:
+    """One line: the material system and the RVEs its powders give."""
+    s = forward.system
+    fa = forward.faithful
+    faithful = ("no faithful RVE (quick)" if fa is None else
+                f"faithful boxes {', '.join(f'{f} {b:g}' for f, b in fa.boxes_um)} um at "
+                f"{fa.voxel_um:g} and {fa.coarse_voxel_um:g} um")
+    return (f"system {s.name} ({s.source or 'default'}): {s.describe()}; cheap RVE "
+            f"{forward.box_um:g} um at {forward.voxel_um:g} um; {faithful}")

@@ -23,7 +23,7 @@ from itr_fv.rve import build_rve
 from itr_surrogate.engine import RVEData, SolveEngine, SolveRequest
 
 from ..forward.fidelity import Correction
-from ..forward.model import MATRIX, PARAMETRISATIONS, ForwardModel, _specs
+from ..forward.model import PARAMETRISATIONS, ForwardModel, filler_specs
 from ..inference.formulations import fractions_of
 from .fit import Group, evaluate, fit_model
 from .outcome import Discrepancy
@@ -41,10 +41,10 @@ def effect_correction(d: Discrepancy, effect, value: float,
     ``value`` and the given resistances (full solves on the faithful packings)."""
     st = d.tables.settings
     fa = st.faithful
-    comp = fractions_of(formulation)
+    comp = fractions_of(formulation, st.system)
     (filler, phi), = comp.items()
     model = ForwardModel(formulation, comp, PARAMETRISATIONS["gap"], st.forward, engine=engine)
-    r_name = resistance_name(filler)
+    r_name = resistance_name(filler, st.system.matrix)
     base_mat = model.materials({r_name: resistances[r_name]})
     spec = fa.spec_for([filler], st.forward.rve)
     coarse = fa.coarse_shape([filler])
@@ -52,11 +52,11 @@ def effect_correction(d: Discrepancy, effect, value: float,
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         for j in range(fa.packings):
-            ms, seed = build_rve(spec, _specs(comp, st.forward.psd_basis), j, matrix=MATRIX,
-                                 warn_box_cut=False)
+            ms, seed = build_rve(spec, filler_specs(st.forward, comp), j,
+                                 matrix=st.system.matrix, warn_box_cut=False)
             seeds.append(seed)
-            ms = effect.rebuild(Repacker(spec.with_(seed=seed), comp, st.forward.psd_basis),
-                                ms, value, seed)
+            ms = effect.rebuild(Repacker(spec.with_(seed=seed), comp, st.forward.psd_basis,
+                                         st.system), ms, value, seed)
             mat = effect.materials_in(ms, base_mat, value)
             rve = RVEData.of(ms)
             for grid, label in ((rve, "fine"), (replace(rve, shape=coarse), "coarse")):

@@ -58,7 +58,7 @@ def _plausible(m: ModelFit, d: Discrepancy, st: DiscrepancySettings) -> bool:
         return False
     lo, hi = st.physical_r_m2K_per_W
     for g in d.groups:
-        r = m.parameters[resistance_name(g.filler)]
+        r = m.parameters[resistance_name(g.filler, st.system.matrix)]
         if not lo <= r <= hi:
             return False
     e = _effect(d, m.name)

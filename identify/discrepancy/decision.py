@@ -9,7 +9,6 @@ from collections.abc import Callable, Sequence
 import numpy as np
 from scipy import stats
 
-from ..forward.model import MATRIX
 from ..inference.formulations import fractions_of
 from ..inference.measurements import Measurements
 from .deciding import deciding_set, rank_measurements, tied_set, unseparated
@@ -117,7 +116,7 @@ def find_discrepancy(measurements: Measurements, *,
         solves); None: every candidate keeps the base model's correction.
     """
     settings = settings or DiscrepancySettings()
-    comps = {f: fractions_of(f) for f in measurements.formulations}
+    comps = {f: fractions_of(f, settings.system) for f in measurements.formulations}
     left_out = [f for f, c in comps.items() if len(c) != 1]
     singles = {f: c for f, c in comps.items() if len(c) == 1}
     if len(singles) < 3:
@@ -131,7 +130,7 @@ def find_discrepancy(measurements: Measurements, *,
     effects = list(tables.effects if effects is None else effects)
     # corrections at best points belong to one table's fits: none carried from an earlier call
     tables.effect_corrections.clear()
-    groups = groups_of(measurements, comps)
+    groups = groups_of(measurements, comps, system=settings.system)
     aux = auxiliary_groups(measurements, comps)
     base = fit_model(tables, groups, None, aux)
     skipped, fits = {}, []
@@ -193,7 +192,7 @@ def resistance_remarks(fit: ModelFit, st: DiscrepancySettings) -> list[str]:
     lo, hi = st.physical_r_m2K_per_W
     out = []
     for name, r in fit.parameters.items():
-        if not (name.startswith("R_") and name.endswith("_" + MATRIX)):
+        if not (name.startswith("R_") and name.endswith("_" + st.system.matrix)):
             continue                  # not a filler-matrix resistance (an effect's parameter)
         notes = []
         if r <= grid[0] * (1 + 1e-9) or r >= grid[-1] * (1 - 1e-9):

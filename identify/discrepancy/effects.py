@@ -20,13 +20,14 @@ the measurement that separates it from its look-alikes. Four kinds:
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from itr_fv import Materials, Microstructure
 from itr_fv.analytic import maxwell_garnett
-from itr_fv.materials.paper_data import PAPER_SYSTEM
+from itr_fv.materials import default_system
+from itr_fv.materials.material_system import MaterialSystem
 
 from .effect import Effect
 from .steepening import STEEPENING_EFFECTS
@@ -48,13 +49,19 @@ class MatrixConductivity(Effect):
     key: str = "matrix"
     name: str = "matrix conductivity off nominal"
     parameter: str = "k_matrix_W_per_mK"
-    nominal: float = PAPER_SYSTEM.matrix_conductivity
-    values: tuple[float, ...] = tuple(f * PAPER_SYSTEM.matrix_conductivity
-                                      for f in (0.5, 0.75, 1.0, 1.5, 2.0))
+    nominal: float = field(default_factory=lambda: default_system().matrix_conductivity)
+    values: tuple[float, ...] = field(default_factory=lambda: _matrix_values(
+        default_system().matrix_conductivity))
     signature: str = ("every formulation shifts the same way; the relative shift is largest "
                       "at the lowest filler fraction and the same for both fillers")
     separate_by: str = ("the conductivity of the neat matrix (silicone + coupling agent) "
                         "and the sample density (voids lower k the same way)")
+
+    @classmethod
+    def for_system(cls, system: MaterialSystem) -> "MatrixConductivity":
+        """The effect about ``system``'s matrix conductivity."""
+        k = system.matrix_conductivity
+        return cls(nominal=k, values=_matrix_values(k))
 
     def materials(self, base: Materials, value: float) -> Materials:
         return base.with_values(conductivity={base.matrix: float(value)})
@@ -247,18 +254,26 @@ class BatchFraction(Effect):
         return np.asarray(value, dtype=float)
 
 
-def default_effects() -> list[Effect]:
+def _matrix_values(k: float) -> tuple[float, ...]:
+    """The matrix conductivities the forward tables solve at, W/(m K): half to twice ``k``."""
+    return tuple(f * k for f in (0.5, 0.75, 1.0, 1.5, 2.0))
+
+
+def default_effects(system: MaterialSystem | None = None) -> list[Effect]:
     """The library, in the order the report lists it: the seven of this module, then the
     steepening candidates of :mod:`itr_identify.discrepancy.steepening` (film thinning,
-    agglomeration, size basis, interphase shell)."""
-    return [MatrixConductivity(), FillerConductivity(), Porosity(), FillerFraction(),
+    agglomeration, size basis, interphase shell); the matrix's about ``system``'s
+    conductivity (default: the package's system)."""
+    matrix = MatrixConductivity() if system is None else MatrixConductivity.for_system(system)
+    return [matrix, FillerConductivity(), Porosity(), FillerFraction(),
             ContactSpots(), TesterContact(), BatchFraction()] + [
                 cls() for cls in STEEPENING_EFFECTS]
 
 
-def by_key(keys: Sequence[str]) -> list[Effect]:
-    """Library effects by their short keys; ValueError naming an unknown one."""
-    lib = {e.key: e for e in default_effects()}
+def by_key(keys: Sequence[str], system: MaterialSystem | None = None) -> list[Effect]:
+    """Library effects by their short keys (about ``system``, :func:`default_effects`);
+    ValueError naming an unknown one."""
+    lib = {e.key: e for e in default_effects(system)}
     out = []
     for k in keys:
         if k not in lib:

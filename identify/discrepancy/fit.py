@@ -13,6 +13,8 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.interpolate import RegularGridInterpolator
 
+from itr_fv.materials.material_system import MaterialSystem
+
 from ..inference.measurements import Measurements
 from ..inference.plausibility import powder_scale
 from .effects import Effect
@@ -44,7 +46,7 @@ class Group:
 
 
 def groups_of(measurements: Measurements, fractions: dict[str, dict[str, float]], *,
-              pool: bool = True) -> list[Group]:
+              system: MaterialSystem, pool: bool = True) -> list[Group]:
     """Measurement groups of the single-filler formulations: per formulation, or per
     formulation and thickness where the table gives thicknesses, and per powder where it
     gives a ``d50_um`` (the powder's median over the material system's is the group's
@@ -68,7 +70,8 @@ def groups_of(measurements: Measurements, fractions: dict[str, dict[str, float]]
              else measurements.thickness_m[f])
         d50 = measurements.auxiliary_of("d50_um", f)
         scale = (np.ones(v.size) if d50 is None else
-                 np.array([1.0 if not np.isfinite(x) else powder_scale(f, x) for x in d50]))
+                 np.array([1.0 if not np.isfinite(x) else powder_scale(f, x, system)
+                           for x in d50]))
         key = np.array([hash((a, b)) for a, b in zip(t, scale)])
         levels = [(float(t[key == u][0]), float(scale[key == u][0])) for u in
                   dict.fromkeys(key)]
@@ -422,7 +425,7 @@ def fit_model(tables: ForwardTables, groups: Sequence[Group], effect: Effect | N
     params = {}
     best_i = {fl: int(np.argmax(ll[fl][:, j])) for fl in fillers}
     for fl in fillers:
-        params[resistance_name(fl)] = float(10 ** fine_r[best_i[fl]])
+        params[resistance_name(fl, st.system.matrix)] = float(10 ** fine_r[best_i[fl]])
     index = {id(g): n for n, g in enumerate(groups)}
     pred, var = np.zeros(len(groups)), np.zeros(len(groups))
     aux_index = {id(a): n for n, a in enumerate(aux)}
@@ -466,7 +469,8 @@ def evaluate(tables: ForwardTables, effect: Effect | None, parameters: dict[str,
     for n, g in enumerate(groups):
         vals = (tables.base[g.formulation] if effect is None or not effect.solved
                 else tables.effect[effect.name][g.formulation])
-        fr = np.clip(np.log10(parameters[resistance_name(g.filler)] / g.scale), logr[0],
+        r_name = resistance_name(g.filler, st.system.matrix)
+        fr = np.clip(np.log10(parameters[r_name] / g.scale), logr[0],
                      logr[-1])
         ft = theta if effect is None or g.scale == 1.0 else float(np.clip(
             effect.size_equivalent(theta, g.scale), axis[0], axis[-1]))

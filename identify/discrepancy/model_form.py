@@ -195,7 +195,7 @@ def fit_model_form(tables: ForwardTables, groups: Sequence[Group], *,
     for f, fl in enumerate(d.fillers):
         joint = special.logsumexp(hyper[..., None] + cond[f], axis=(0, 1))
         q = _quantiles(d.log_r, joint, (0.5, 0.05, 0.95))
-        res[resistance_name(fl)] = tuple(float(10 ** x) for x in q)
+        res[resistance_name(fl, tables.settings.system.matrix)] = tuple(float(10 ** x) for x in q)
     amp_w = special.logsumexp(hyper, axis=1)
     len_w = special.logsumexp(hyper, axis=0)
     return ModelFormFit(res, tuple(_quantiles(amps, amp_w, (0.5, 0.05, 0.95))),

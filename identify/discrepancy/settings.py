@@ -7,7 +7,6 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from itr_fv.materials.material_system import MaterialSystem
-from itr_fv.materials.paper_data import PAPER_SYSTEM
 from itr_fv.rve.spec import RVESpec
 
 from ..forward.fidelity import FaithfulRVE, faithful_for
@@ -48,10 +47,6 @@ class DiscrepancySettings:
         and diffuse mismatch give 1e-9 to 1e-8 for clean oxide or nitride-polymer
         interfaces; adsorbed layers and coupling agents up to about 1e-7): a fit outside it
         is reported as an implausible resistance.
-    system : MaterialSystem
-        Phase densities (g/cm^3) for the density and filler mass fraction of a sample
-        (default: the paper's system with handbook densities, Al2O3 3.95, AlN 3.26,
-        silicone 0.97; :meth:`MaterialSystem.with_densities` overrides them).
     auxiliary_model_sd : float
         Relative standard uncertainty of a predicted density or mass fraction given the
         stated phase densities (ideal mixing; the coupling agent's 4 vol% of the matrix at
@@ -87,7 +82,6 @@ class DiscrepancySettings:
     tie_margin: float = 2.0
     significance: float = 0.01
     physical_r_m2K_per_W: tuple[float, float] = (1e-9, 1e-7)
-    system: MaterialSystem = PAPER_SYSTEM
     auxiliary_model_sd: float = 0.001
     fraction_sd: float = 0.002
     assumed_thickness_mm: float = 1.0
@@ -95,6 +89,14 @@ class DiscrepancySettings:
         "density_g_per_cm3": 0.003, "filler_mass_fraction": 0.003, "samples": 4,
         "thicknesses_mm": (0.5, 1.0, 1.5), "powder_scale": 0.5})
     correct_at_best: bool = True
+
+    @property
+    def system(self) -> MaterialSystem:
+        """The material system (``forward.system``): phases, conductivities, sizes and the
+        densities (g/cm^3) that predict a sample's density and filler mass fraction
+        (default: the paper's system with handbook densities, Al2O3 3.95, AlN 3.26,
+        silicone 0.97; :meth:`MaterialSystem.with_densities` overrides them)."""
+        return self.forward.system
 
     def __post_init__(self) -> None:
         r = np.asarray(self.r_grid_m2K_per_W, dtype=float)

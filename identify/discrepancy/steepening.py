@@ -27,16 +27,16 @@ import math
 import warnings
 import weakref
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from itr_fv import Materials, Microstructure
-from itr_fv.materials.paper_data import TABLE1
+from itr_fv.materials import default_system
+from itr_fv.materials.material_system import MaterialSystem
 from itr_fv.rve import FillerSpec, generate_rve
 from itr_fv.rve.spec import RVESpec
 
-from ..forward.model import MATRIX
 from .effect import Effect
 
 __all__ = ["Repacker", "FilmThinning", "Agglomeration", "SizeBasis", "InterphaseShell",
@@ -73,14 +73,19 @@ class Repacker:
         The formulation's filler volume fractions.
     basis : {"number", "volume"}
         Weighting of Table 1's lognormal (``ForwardSettings.psd_basis``).
-    matrix : str
-        The matrix phase.
+    system : MaterialSystem
+        The matrix and the fillers' size distributions (default: the package's).
     """
 
     spec: RVESpec
     fractions: Mapping[str, float]
     basis: str = "number"
-    matrix: str = MATRIX
+    system: MaterialSystem = field(default_factory=default_system)
+
+    @property
+    def matrix(self) -> str:
+        """The matrix phase."""
+        return self.system.matrix
 
     @classmethod
     def of(cls, model, replica: int = 0) -> "Repacker":
@@ -89,12 +94,13 @@ class Repacker:
         the seed that packed the replica, :attr:`ForwardModel.seeds`)."""
         s = model.settings
         seed = int(model.seeds[replica]) if len(model.seeds) > replica else s.seed + replica
-        return cls(s.rve.with_(seed=seed), dict(model.fractions), s.psd_basis, MATRIX)
+        return cls(s.rve.with_(seed=seed), dict(model.fractions), s.psd_basis, s.system)
 
     def fillers(self, fractions: Mapping[str, float] | None = None,
                 median_scale: float | Mapping[str, float] | None = None) -> list[FillerSpec]:
-        """The fillers of a packing: Table 1's distributions at ``fractions`` (default the
-        formulation's), every diameter of filler ``f`` times ``median_scale[f]``."""
+        """The fillers of a packing: the system's size distributions at ``fractions``
+        (default the formulation's), every diameter of filler ``f`` times
+        ``median_scale[f]``."""
         fr = dict(self.fractions if fractions is None else fractions)
         if median_scale is None:
             scale = {}
@@ -108,7 +114,9 @@ class Repacker:
                              f"({sorted(fr)})")
         out = []
         for f, v in fr.items():
-            spec = FillerSpec.from_table1(f, v, basis=self.basis)
+            psd = self.system.filler(f).psd
+            basis = self.basis if psd.basis == "number" else psd.basis
+            spec = FillerSpec(f, psd.mu, psd.sigma, v, basis=basis)
             s = scale.get(f, 1.0)
             if not (isinstance(s, (int, float)) and math.isfinite(s) and s > 0):
                 raise ValueError(f"median_scale[{f!r}]: expected a factor > 0, got {s!r}")
@@ -360,17 +368,18 @@ class SizeBasis(_Repacking, Effect):
     kind: str = "geometry"
     scales_resistance: bool = True
 
-    def median_scale(self, filler: str, value: float) -> float:
-        """Factor on the number median (on every diameter) of ``filler`` at ``value``."""
-        if filler not in TABLE1:
-            raise ValueError(f"filler: no Table 1 size distribution for {filler!r}")
-        return math.exp(-3.0 * TABLE1[filler].sigma ** 2 * float(value))
+    def median_scale(self, filler: str, value: float,
+                     system: MaterialSystem | None = None) -> float:
+        """Factor on the number median (on every diameter) of ``filler`` at ``value`` (its
+        sigma from ``system``, default the package's)."""
+        sigma = (system or default_system()).filler(filler).psd.sigma
+        return math.exp(-3.0 * sigma ** 2 * float(value))
 
     def rebuild(self, pack, base, value, seed):
         theta = self._check_value(value, 0.0, 1.0)
         if theta == self.nominal:
             return base
-        scale = {f: self.median_scale(f, theta) for f in filler_fractions(base)}
+        scale = {f: self.median_scale(f, theta, pack.system) for f in filler_fractions(base)}
         return self._repack(pack, theta, median_scale=scale)
 
 

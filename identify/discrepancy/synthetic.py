@@ -71,7 +71,7 @@ def synthetic_measurements(formulations: Sequence[str], resistances: dict[str, f
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         for f in formulations:
-            comp = fractions_of(f)
+            comp = fractions_of(f, s.system)
             model = ForwardModel(f, comp, PARAMETRISATIONS["gap"], s.with_(seed=rve_seed))
             mat = model.materials({p: resistances[p] for p in model.parameters})
             ks = []

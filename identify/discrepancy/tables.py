@@ -18,7 +18,7 @@ from itr_fv.materials.parameters import parameter_name
 from itr_surrogate.engine import RVEData, SolveEngine, SolveRequest
 
 from ..forward.fidelity import Correction
-from ..forward.model import MATRIX, PARAMETRISATIONS, ForwardModel
+from ..forward.model import PARAMETRISATIONS, ForwardModel
 from .effects import Effect, default_effects
 from .settings import DiscrepancySettings
 
@@ -68,9 +68,9 @@ def n_solves(n_formulations: int, settings: DiscrepancySettings,
                              + faithful)
 
 
-def resistance_name(filler: str) -> str:
-    """The flat name of the filler-matrix resistance of ``filler``."""
-    return parameter_name("R", filler, MATRIX)
+def resistance_name(filler: str, matrix: str) -> str:
+    """The flat name of the filler-matrix resistance of ``filler`` in ``matrix``."""
+    return parameter_name("R", filler, matrix)
 
 
 def build_tables(fractions: dict[str, dict[str, float]], *,
@@ -94,7 +94,7 @@ def build_tables(fractions: dict[str, dict[str, float]], *,
         once per worker).
     """
     settings = settings or DiscrepancySettings()
-    effects = list(default_effects() if effects is None else effects)
+    effects = list(default_effects(settings.system) if effects is None else effects)
     engine = engine or SolveEngine()
     t0 = time.perf_counter()
     s = settings.forward
@@ -108,7 +108,7 @@ def build_tables(fractions: dict[str, dict[str, float]], *,
             if len(comp) != 1:
                 continue
             (filler, _), = comp.items()
-            r_name = resistance_name(filler)
+            r_name = resistance_name(filler, s.system.matrix)
             model = ForwardModel(f, comp, PARAMETRISATIONS["gap"], s, engine=engine)
             model.microstructures = [model.pack(r) for r in range(s.replicas)]
             model.replica_k = model.solve_replicas({r_name: settings.r_scatter_m2K_per_W},

@@ -15,7 +15,7 @@ The file::
     voxels_um = [0.25, 0.2]     # coarse and fine voxel of the same packing, um
     packings = 2                # faithful packings per formulation
     seed = 9001                 # packing seed of the first faithful packing
-    solver = "mg"               # any solver choice (itr_fv.solvers.choice)
+    solver = "mg"               # any solver choice (itr_fv.solvers.choice; default its default)
     tol = 1e-7                  # relative residual of the faithful solves
 
     [[system]]
@@ -34,23 +34,26 @@ The file::
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from itr_fv.checks import unknown_key
 from itr_fv.io import read_toml
+from itr_fv.materials import default_system
+from itr_fv.materials.material_system import MaterialSystem
+from itr_fv.rve.from_powders import FAITHFUL_VOXEL_RATIO, faithful_box, voxel_for
 from itr_fv.rve.spec import RVESpec
-from itr_fv.solvers.choice import DEFAULT_SOLVER, check_solver
+from itr_fv.solvers.choice import check_solver
 from itr_surrogate.campaign import Campaign
 
-from .fidelity import CHEAP_REPLICAS, CHEAP_RVE, CHEAP_TOL
+from .fidelity import CHEAP_REPLICAS, CHEAP_TOL, cheap_rve_for
 
 __all__ = ["CorrectionPlan", "CorrectionSystem"]
 
 _TOP = {"name", "voxels_um", "packings", "seed", "solver", "tol", "system"}
-_SYSTEM = {"name", "box_um", "formulations", "values"}
-_SYSTEM_OPTIONAL = {"voxels_um", "bias_from"}
+_SYSTEM = {"name", "formulations", "values"}
+_SYSTEM_OPTIONAL = {"voxels_um", "bias_from", "box_um"}
 
 
 @dataclass(frozen=True)
@@ -79,23 +82,34 @@ class CorrectionPlan:
     solver: str
     tol: float
     systems: tuple[CorrectionSystem, ...]
+    material: MaterialSystem = field(default_factory=default_system)
 
     @classmethod
-    def from_toml(cls, path: str | Path) -> "CorrectionPlan":
-        """Read and check a corrections file (ValueError naming the file and key)."""
+    def from_toml(cls, path: str | Path,
+                  material: MaterialSystem | None = None) -> "CorrectionPlan":
+        """Read and check a corrections file (ValueError naming the file and key) for the
+        material system ``material`` (default: the package's)."""
         p = Path(path)
         data = read_toml(p, "corrections file")
         try:
-            return cls.from_dict(data)
+            return cls.from_dict(data, material)
         except ValueError as exc:
             raise ValueError(f"{p}: {exc}") from None
 
     @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> "CorrectionPlan":
+    def from_dict(cls, data: dict[str, Any],
+                  material: MaterialSystem | None = None) -> "CorrectionPlan":
+        """A checked plan; where it states no voxels or a system no box, those of the
+        material system's powders (:mod:`itr_fv.rve.from_powders`: the cheap voxel and
+        0.8 of it; the smallest box whose size cut removes at most 1.5 % of any of the
+        system's fillers' volume)."""
+        material = material or default_system()
         unknown = unknown_key(data, _TOP)
         if unknown:
             raise ValueError(unknown)
-        voxels = tuple(float(v) for v in data.get("voxels_um", ()))
+        h = voxel_for(f.psd for f in material.fillers)
+        voxels = tuple(float(v) for v in data.get(
+            "voxels_um", (h, round(FAITHFUL_VOXEL_RATIO * h, 12))))
         if len(voxels) != 2 or not 0 < voxels[1] < voxels[0]:
             raise ValueError(f"voxels_um: expected [coarse, fine] edges in um with coarse > "
                              f"fine > 0, got {data.get('voxels_um')!r}")
@@ -119,15 +133,21 @@ class CorrectionPlan:
             if own is not None and len(own) == 2 and not 0 < own[1] < own[0]:
                 raise ValueError(f"system {i}: voxels_um: expected [coarse, fine], got "
                                  f"{list(own)}")
+            try:
+                box = float(s["box_um"]) if "box_um" in s else max(
+                    faithful_box(material.filler(f).psd, voxels[0])
+                    for f in str(s["name"]).split("-"))
+            except ValueError as exc:
+                raise ValueError(f"system {i}: {exc}") from None
             systems.append(CorrectionSystem(
-                str(s["name"]), float(s["box_um"]), tuple(str(f) for f in s["formulations"]),
+                str(s["name"]), box, tuple(str(f) for f in s["formulations"]),
                 {str(k): tuple(float(x) for x in v) for k, v in s["values"].items()},
                 own, bias_from))
         if not systems:
             raise ValueError("system: give at least one [[system]]")
         plan = cls(str(data.get("name", "corrections")), voxels, packings,
-                   int(data.get("seed", 9001)), str(data.get("solver", "mg")),
-                   float(data.get("tol", 1e-7)), tuple(systems))
+                   int(data.get("seed", 9001)), check_solver(data.get("solver")),
+                   float(data.get("tol", 1e-7)), tuple(systems), material)
         check_solver(plan.solver)
         for s in plan.systems:   # every campaign checks its own keys before any work
             try:
@@ -165,7 +185,7 @@ class CorrectionPlan:
                 **{k: v for k, v in rve.to_dict().items() if k != "tail_quantile"},
                 "formulation": [{"name": f} for f in s.formulations],
                 "design": {"kind": "grid", "values": {k: list(v) for k, v in s.values.items()}}}
-        return Campaign.from_dict(data)
+        return Campaign.from_dict(data, self.material)
 
     def faithful_campaign(self, system: str, voxel_um: float, *, solver: str | None = None,
                           threads: int = 1) -> Campaign:
@@ -179,8 +199,8 @@ class CorrectionPlan:
                              f"not {voxel_um!r}")
         fine = voxels[-1]
         # the coarse voxel solves the fine campaign's particles (its fine-tail cut)
-        rve = CHEAP_RVE.with_(box_um=s.box_um, voxel_um=voxel_um, seed=self.seed,
-                              cut_voxel_um=None if voxel_um == fine else fine)
+        rve = self.cheap_rve.with_(box_um=s.box_um, voxel_um=voxel_um, seed=self.seed,
+                                   cut_voxel_um=None if voxel_um == fine else fine)
         return self._campaign(s, f"{self.name}-{s.name}-{voxel_um:g}um", rve, self.packings,
                               self.tol, solver, threads)
 
@@ -188,8 +208,15 @@ class CorrectionPlan:
         """The campaign of one system's cheap RVEs (the replicas the reduced basis of
         ``itr reproduce`` is fitted on), at the same design."""
         s = self.system(system)
-        return self._campaign(s, f"{self.name}-{s.name}-cheap", CHEAP_RVE, CHEAP_REPLICAS,
-                              CHEAP_TOL, solver or DEFAULT_SOLVER)
+        return self._campaign(s, f"{self.name}-{s.name}-cheap", self.cheap_rve,
+                              CHEAP_REPLICAS, CHEAP_TOL, check_solver(solver))
+
+    @property
+    def cheap_rve(self) -> RVESpec:
+        """The cheap RVE the corrections correct: the material system's
+        (:func:`~itr_identify.forward.fidelity.cheap_rve_for`; the paper's: 12 um at
+        0.25 um)."""
+        return cheap_rve_for(self.material)
 
     def folders(self, system: str) -> dict[str, str]:
         """Sub-folder of each of a system's campaigns: ``coarse`` and ``fine`` (or ``only``

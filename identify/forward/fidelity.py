@@ -34,16 +34,19 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
 
+from itr_fv.materials import is_default_system
+from itr_fv.materials.material_system import MaterialSystem
+from itr_fv.rve.from_powders import FAITHFUL_VOXEL_RATIO, cheap_rve, faithful_box, voxel_for
 from itr_fv.rve.spec import RVESpec, voxels_per_edge
 
 __all__ = ["CHEAP_RVE", "CHEAP_REPLICAS", "CHEAP_TOL", "FaithfulRVE", "Correction", "richardson",
            "direction_scatter", "BIAS_ORDER",
-           "BIAS_ORDER_SE", "FIDELITY_LEVELS", "faithful_for", "fidelity_name"]
+           "BIAS_ORDER_SE", "FIDELITY_LEVELS", "faithful_for", "fidelity_name", "cheap_rve_for"]
 
 #: The cheap RVE of ``itr reproduce`` and ``itr identify`` (12 um box at 0.25 um), its
 #: replicas (packing seeds 1, 2, 3) and the relative residual of its solves: what the reduced
@@ -113,9 +116,12 @@ class FaithfulRVE:
     name : str
         The fidelity level it belongs to (:data:`FIDELITY_LEVELS`), or ``"custom"``.
     shipped : bool
-        Use the corrections shipped with the package (:mod:`itr_identify.forward.shipped`)
-        for every formulation they hold (the cheap RVE must be :data:`CHEAP_RVE` with
-        number-weighted Table 1 sizes); the others are corrected at runtime on these RVEs.
+        Use a corrections table (:mod:`itr_identify.forward.shipped`) for every formulation
+        it holds (its material system and cheap RVE must be the settings'); the others are
+        corrected at runtime on these RVEs.
+    corrections : str, optional
+        The corrections table's file: a lab's own (``itr corrections build --system``)
+        for its system; None: the one shipped with the package (the paper's system).
     """
 
     boxes_um: tuple[tuple[str, float], ...]
@@ -127,8 +133,12 @@ class FaithfulRVE:
     max_rounds: int = 4
     name: str = "custom"
     shipped: bool = False
+    corrections: str | None = None
 
     def __post_init__(self) -> None:
+        if self.corrections is not None and not self.shipped:
+            raise ValueError("corrections: a corrections file is read at a level that uses "
+                             "tabled corrections (shipped)")
         boxes = tuple((str(f), float(b)) for f, b in dict(self.boxes_um).items())
         if not boxes:
             raise ValueError("boxes_um: expected a box per filler, got none")
@@ -185,7 +195,8 @@ class FaithfulRVE:
                 "coarse_voxel_um": self.coarse_voxel_um, "packings": self.packings,
                 "seed": self.seed, "move_tolerance": self.move_tolerance,
                 "max_rounds": self.max_rounds}
-        head = {"name": self.name, "shipped": self.shipped}
+        head = {"name": self.name, "shipped": self.shipped,
+                **({"corrections": self.corrections} if self.corrections else {})}
         body = {"runtime_fallback": rves} if self.shipped else rves
         return {**head, **body, "bias_order": BIAS_ORDER, "bias_order_se": BIAS_ORDER_SE}
 
@@ -285,12 +296,32 @@ FIDELITY_LEVELS: dict[str, FaithfulRVE | None] = {
 }
 
 
-def faithful_for(level: str) -> FaithfulRVE | None:
-    """The faithful RVE of a fidelity level (ValueError naming ``fidelity``)."""
+def faithful_for(level: str, system: MaterialSystem | None = None) -> FaithfulRVE | None:
+    """The faithful RVE of a fidelity level (ValueError naming ``fidelity``) for ``system``.
+
+    The paper's system (or one that solves as it does) takes the level's measured boxes
+    (:data:`FIDELITY_LEVELS`); any other takes the boxes and voxels of its powders
+    (:mod:`itr_fv.rve.from_powders`: per filler the smallest box whose size cut removes at
+    most 1.5 % of its volume; the voxel pair 0.8 and 1 times the cheap voxel, at ``paper``
+    half of those)."""
     if level not in FIDELITY_LEVELS:
         raise ValueError(f"fidelity: expected one of {', '.join(FIDELITY_LEVELS)}, got "
                          f"{level!r}")
-    return FIDELITY_LEVELS[level]
+    base = FIDELITY_LEVELS[level]
+    if base is None or system is None or is_default_system(system):
+        return base
+    h = voxel_for(f.psd for f in system.fillers)
+    if level == "paper":
+        h = h / 2
+    boxes = tuple((f.name, faithful_box(f.psd, h)) for f in system.fillers)
+    return replace(base, boxes_um=boxes, voxel_um=round(FAITHFUL_VOXEL_RATIO * h, 12),
+                   coarse_voxel_um=h)
+
+
+def cheap_rve_for(system: MaterialSystem) -> RVESpec:
+    """The cheap RVE of ``system``'s identification (:func:`itr_fv.rve.from_powders.
+    cheap_rve`; the paper's system: :data:`CHEAP_RVE`, 12 um at 0.25 um)."""
+    return cheap_rve(f.psd for f in system.fillers)
 
 
 def fidelity_name(faithful: FaithfulRVE | None) -> str:

@@ -9,13 +9,15 @@ depends on and what contact model carries them:
 - ``"gap"`` (physical): ``contact="gap"``; per filler ``R_<f>_silicone`` only: a contact is
   two particle-matrix interfaces and the true matrix film between the spheres (Eq. 6).
 
-A :class:`ForwardModel` packs the replicas of one formulation (Table 1 size distributions),
+A :class:`ForwardModel` packs the replicas of one formulation (the size distributions of the
+settings' material system),
 fits a :class:`itr_surrogate.reduced_basis.ReducedBasis` on the first replica over the prior
 box of its parameters, and measures the RVE-to-RVE scatter by full solves of every replica
 at the centre of the box. Its prediction is the first replica's reduced basis scaled by the
 ratio of the replica mean to the first replica at the centre
-(:attr:`ForwardModel.replica_factor`). Filler and matrix conductivities stay at the paper's values
-(``itr_fv.materials.paper_data.PAPER_CONDUCTIVITY``), as in the paper's screening.
+(:attr:`ForwardModel.replica_factor`). Filler and matrix conductivities stay at the nominal
+values of the material system (:attr:`ForwardSettings.system`; the paper's by default), as in
+the paper's screening; the identification marginalises them afterwards.
 """
 
 from __future__ import annotations
@@ -26,17 +28,18 @@ import time
 import warnings
 from collections.abc import Callable, Iterator, Mapping
 from contextlib import contextmanager
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 
 import numpy as np
 
 from itr_fv import Materials
 from itr_fv.discrete.problem import DiscreteProblem
-from itr_fv.materials import paper_data
+from itr_fv.materials import default_system
+from itr_fv.materials.material_system import MaterialSystem
 from itr_fv.materials.parameters import parameter_name
 from itr_fv.rve import FillerSpec, build_rve
 from itr_fv.rve.spec import RVESpec
-from itr_fv.solvers.choice import DEFAULT_SOLVER, check_solver
+from itr_fv.solvers.choice import check_solver, default_solver
 from itr_surrogate.engine import (
     RVEData,
     SolveEngine,
@@ -47,14 +50,11 @@ from itr_surrogate.engine import (
 )
 from itr_surrogate.reduced_basis import ReducedBasis
 
-from .fidelity import CHEAP_REPLICAS, CHEAP_RVE, Correction, FaithfulRVE, direction_scatter
+from .fidelity import CHEAP_REPLICAS, Correction, FaithfulRVE, direction_scatter
 from .shipped import ShippedCorrections, ShippedFactor
 
 __all__ = ["Parametrisation", "PARAMETRISATIONS", "ForwardSettings", "ForwardModel",
-           "full_solve", "MATRIX"]
-
-#: The matrix of the paper's material system.
-MATRIX = paper_data.PAPER_SYSTEM.matrix
+           "full_solve", "filler_specs"]
 #: The engine of models built without one: serial, in this process, no store.
 _SERIAL = SolveEngine()
 #: Held by the thread whose model does work in this process (see ForwardModel.build).
@@ -97,10 +97,11 @@ class Parametrisation:
     contact: str
     description: str
 
-    def parameters(self, fillers: list[str] | tuple[str, ...]) -> list[str]:
-        """Flat names of the identified parameters of a formulation holding ``fillers``."""
+    def parameters(self, fillers: list[str] | tuple[str, ...], *, matrix: str) -> list[str]:
+        """Flat names of the identified parameters of a formulation holding ``fillers`` in
+        ``matrix``."""
         fl = sorted(fillers)
-        out = [parameter_name("R", f, MATRIX) for f in fl]
+        out = [parameter_name("R", f, matrix) for f in fl]
         if self.contact == "area":
             out += [parameter_name("Rff", a, b) for i, a in enumerate(fl) for b in fl[i:]]
         return out
@@ -110,7 +111,7 @@ PARAMETRISATIONS = {
     "area": Parametrisation("area", "area", "paper-compatible: filler-matrix R and per-area "
                             "contact resistance Rff per filler pair (contact='area')"),
     "gap": Parametrisation("gap", "gap", "physical: filler-matrix R per filler; a contact is "
-                           "two interfaces and the true silicone film (contact='gap')"),
+                           "two interfaces and the true matrix film (contact='gap')"),
 }
 
 
@@ -147,6 +148,9 @@ class ForwardSettings:
         Where the gap parametrisation's models are corrected by full solves on faithful
         RVEs (:mod:`itr_identify.forward.fidelity`); None: no correction, the results hold
         at :attr:`rve`'s fidelity only.
+    system : MaterialSystem
+        The matrix and fillers: nominal conductivities, size distributions, known
+        resistances (:mod:`itr_fv.materials.system_file`; default: the paper's).
     """
 
     rve: RVESpec = RVESpec(box_um=16.0, voxel_um=0.25)
@@ -155,11 +159,15 @@ class ForwardSettings:
     rb_tol: float = 2e-3
     rb_max_solves: int = 30
     solver_tol: float = 1e-8
-    solver: str = DEFAULT_SOLVER
+    solver: str = field(default_factory=default_solver)
     psd_basis: str = "number"
     faithful: FaithfulRVE | None = None
+    system: MaterialSystem = field(default_factory=default_system)
 
     def __post_init__(self) -> None:
+        if not isinstance(self.system, MaterialSystem):
+            raise ValueError(f"system: expected a MaterialSystem, got "
+                             f"{type(self.system).__name__}")
         if self.faithful is not None and not isinstance(self.faithful, FaithfulRVE):
             raise ValueError(f"faithful: expected a FaithfulRVE or None, got "
                              f"{type(self.faithful).__name__}")
@@ -187,8 +195,9 @@ class ForwardSettings:
 
     def to_dict(self) -> dict:
         """Flat JSON-able form: the RVE's fields next to the others."""
-        d = asdict(self)
-        del d["rve"]
+        d = {f.name: getattr(self, f.name) for f in fields(self)
+             if f.name not in ("rve", "system", "faithful")}
+        d["system"] = self.system.to_dict()
         d["prior_m2K_per_W"] = list(self.prior_m2K_per_W)
         d["faithful"] = self.faithful.to_dict() if self.faithful is not None else None
         return {**self.rve.to_dict(), **d}
@@ -203,8 +212,17 @@ class ForwardSettings:
         return replace(self, **changes)
 
 
-def _specs(fractions: Mapping[str, float], basis: str = "number") -> list[FillerSpec]:
-    return [FillerSpec.from_table1(f, v, basis=basis) for f, v in fractions.items()]
+def filler_specs(settings: ForwardSettings, fractions: Mapping[str, float]) -> list[FillerSpec]:
+    """The fillers of a formulation (filler -> volume fraction) as the RVE generator takes
+    them: the size distributions of ``settings.system``. ``settings.psd_basis`` ``"volume"``
+    reads a number-basis statement as volume-weighted (the basis question of the paper's
+    Table 1); a statement in the volume basis is taken as stated."""
+    out = []
+    for f, v in fractions.items():
+        psd = settings.system.filler(f).psd
+        basis = settings.psd_basis if psd.basis == "number" else psd.basis
+        out.append(FillerSpec(f, psd.mu, psd.sigma, v, basis=basis))
+    return out
 
 
 def shipped_factor(settings: ForwardSettings, parametrisation: Parametrisation,
@@ -216,18 +234,23 @@ def shipped_factor(settings: ForwardSettings, parametrisation: Parametrisation,
     fa = settings.faithful
     if fa is None or not fa.shipped or parametrisation.contact != "gap":
         return None, ""
-    if settings.rve != CHEAP_RVE or settings.replicas != CHEAP_REPLICAS:
-        return None, ("the shipped corrections correct the default cheap RVE (12 um at "
-                      "0.25 um, 3 replicas), not this one")
+    if settings.replicas != CHEAP_REPLICAS:
+        return None, (f"the corrections correct the cheap RVE's {CHEAP_REPLICAS} replicas, "
+                      f"not {settings.replicas}")
     if settings.psd_basis != "number":
-        return None, "the shipped corrections hold for number-weighted Table 1 sizes"
-    table = ShippedCorrections.load()
+        return None, ("the corrections hold for the system's size distributions as stated "
+                      "(the paper's Table 1: number-weighted), not re-read as "
+                      "volume-weighted")
+    table = ShippedCorrections.load(fa.corrections, argument="--corrections")
+    why = table.why_not_for(settings.system, settings.rve)
+    if why:
+        return None, why
     factor = table.for_fractions(fractions)
     return (factor, "") if factor is not None else (None, table.why_not(fractions))
 
 
 def full_solve(ms, materials: Materials, tol: float, *, engine: SolveEngine | None = None,
-               solver: str = DEFAULT_SOLVER, **labels) -> np.ndarray:
+               solver: str | None = None, **labels) -> np.ndarray:
     """Diagonal of k_eff (3,), W/(m K), of ``ms`` (a packed Microstructure, or its
     :class:`~itr_fv.discrete.problem.DiscreteProblem`) by a full solve on the solve engine
     (:mod:`itr_surrogate.engine`; default: this process, no store). The engine keeps one
@@ -275,15 +298,21 @@ class ForwardModel:
     @property
     def parameters(self) -> list[str]:
         """The varied parameters (those of the parametrisation not in :attr:`fixed`)."""
-        return [p for p in self.parametrisation.parameters(list(self.fractions))
+        return [p for p in self.parametrisation.parameters(list(self.fractions),
+                                                           matrix=self.settings.system.matrix)
                 if p not in self.fixed]
 
     def materials(self, values: Mapping[str, float]) -> Materials:
-        """Paper conductivities plus ``values`` (flat names) under this contact model."""
-        k = paper_data.PAPER_SYSTEM.conductivities(self.fractions)
-        base = Materials(k, {(f, MATRIX): 1e-8 for f in self.fractions}, matrix=MATRIX,
+        """The system's nominal conductivities and known resistances plus ``values`` (flat
+        names) under this contact model."""
+        system = self.settings.system
+        matrix = system.matrix
+        k = system.conductivities(self.fractions)
+        base = Materials(k, {(f, matrix): 1e-8 for f in self.fractions}, matrix=matrix,
                          contact=self.parametrisation.contact)
-        params = {**self.fixed, **dict(values)}
+        known = {n: v for n, v in system.resistances
+                 if set(n.split("_")[1:]) <= set(k)}
+        params = {**known, **self.fixed, **dict(values)}
         if self.parametrisation.contact == "area":
             fl = sorted(self.fractions)
             for i, a in enumerate(fl):
@@ -297,9 +326,9 @@ class ForwardModel:
         fails; the seed used is kept in :attr:`seeds`). The box cut of the coarse tail is
         in the report, not a warning; ``progress``: the packing's bar (shown after a
         second)."""
-        ms, seed = build_rve(self.settings.rve,
-                             _specs(self.fractions, self.settings.psd_basis), replica,
-                             matrix=MATRIX, warn_box_cut=False, progress=progress)
+        ms, seed = build_rve(self.settings.rve, filler_specs(self.settings, self.fractions),
+                             replica, matrix=self.settings.system.matrix,
+                             warn_box_cut=False, progress=progress)
         self.seeds.append(seed)
         return ms
 
@@ -496,8 +525,9 @@ class ForwardModel:
             if not self.faithful_rves:
                 spec = faithful.spec_for(fillers, self.settings.rve)
                 for j in range(faithful.packings):
-                    ms, seed = build_rve(spec, _specs(self.fractions, self.settings.psd_basis),
-                                         j, matrix=MATRIX, warn_box_cut=False)
+                    ms, seed = build_rve(spec, filler_specs(self.settings, self.fractions),
+                                         j, matrix=self.settings.system.matrix,
+                                         warn_box_cut=False)
                     self.faithful_rves.append((RVEData.of(ms), seed))
             mat = self.materials(values)
             if k_model is None:

@@ -38,14 +38,16 @@ from typing import Any
 
 import numpy as np
 
+from itr_fv.materials import is_default_system
+from itr_fv.materials.material_system import MaterialSystem
 from itr_fv.rve.contact_film import CONTACT_GEOMETRY
+from itr_fv.rve.spec import RVESpec
 
 from .correction_plan import CorrectionPlan
 from .fidelity import (
     BIAS_ORDER,
     BIAS_ORDER_SE,
     CHEAP_REPLICAS,
-    CHEAP_RVE,
     CHEAP_TOL,
     direction_scatter,
     richardson,
@@ -125,7 +127,7 @@ def point_rows(plan: CorrectionPlan, folder: str | Path, system: str) -> list[di
         lo, hi = (richardson(kf, kc, ratio, BIAS_ORDER + d).mean()
                   for d in (-2 * BIAS_ORDER_SE, 2 * BIAS_ORDER_SE))
         u_order = abs(hi - lo) / 2 / k_faithful
-        out.append({"formulation": key[0], "fractions": _fractions(key[0]),
+        out.append({"formulation": key[0], "fractions": _fractions(key[0], plan),
                     "values": {n: v / 1e12 for n, v in zip(names, key[1:])},
                     "k_cheap": k_cheap, "k_fine_iso": kf.tolist(), "k_coarse_iso": kc.tolist(),
                     "k_faithful_iso": k0.tolist(), "k_faithful": k_faithful,
@@ -168,7 +170,7 @@ def _one_voxel_points(plan: CorrectionPlan, folder: str | Path, s, names: list[s
         k0_diag = np.array([only[j][0] for j in packs]) / (1 + bias)
         k_cheap = float(np.mean([cheap[r][1] for r in sorted(cheap)]))
         k_faithful = float(k0.mean())
-        out.append({"formulation": key[0], "fractions": _fractions(key[0]), "values": values,
+        out.append({"formulation": key[0], "fractions": _fractions(key[0], plan), "values": values,
                     "k_cheap": k_cheap, "k_voxel_iso": kv.tolist(), "voxel_um": voxel,
                     "k_faithful_iso": k0.tolist(), "k_faithful": k_faithful,
                     "c": k_faithful / k_cheap, "packing_sd": _packing_sd(k0_diag, k0),
@@ -183,10 +185,10 @@ def _cheap_sd(cheap: Mapping[int, tuple[np.ndarray, float]]) -> float:
     return float(k.std(ddof=1) / k.mean() / math.sqrt(len(k)))
 
 
-def _fractions(name: str) -> dict[str, float]:
+def _fractions(name: str, plan: CorrectionPlan) -> dict[str, float]:
     from itr_fv.materials.formulation_names import fractions_of
 
-    return fractions_of(name)
+    return fractions_of(name, plan.material)
 
 
 def _design(points: list[dict], names: list[str]) -> tuple[np.ndarray, float, dict]:
@@ -263,11 +265,26 @@ def assemble(plan: CorrectionPlan, folder: str | Path, *,
             "seeds": [plan.seed + j for j in range(plan.packings)], "solver": plan.solver,
             "tol": plan.tol, "bias_order": BIAS_ORDER, "bias_order_se": BIAS_ORDER_SE,
             "contacts": CONTACT_GEOMETRY,
-            "cheap_rve": {**CHEAP_RVE.to_dict(), "replicas": CHEAP_REPLICAS,
-                          "seeds": [CHEAP_RVE.seed + r for r in range(CHEAP_REPLICAS)],
+            "cheap_rve": {**plan.cheap_rve.to_dict(), "replicas": CHEAP_REPLICAS,
+                          "seeds": [plan.cheap_rve.seed + r for r in range(CHEAP_REPLICAS)],
                           "tol": CHEAP_TOL},
+            "material_system": plan.material.to_dict(),
             **dict(provenance or {})}
     return {"provenance": prov, "systems": systems, "points": points}
+
+
+def _solve_key(system: Mapping[str, Any]) -> tuple:
+    """What solves depend on in a material system's dict (MaterialSystem.to_dict): the
+    phases, conductivities, size distributions (number basis) and known resistances."""
+    m = system["matrix"]
+    fillers = []
+    for f in system["fillers"]:
+        size = f["size"]
+        mu = size["mu_ln_um"] - (3 * size["sigma_ln"] ** 2 if size["basis"] == "volume" else 0)
+        fillers.append((f["name"], round(f["conductivity_W_per_mK"], 12), round(mu, 12),
+                        round(size["sigma_ln"], 12)))
+    return (m["name"], round(m["conductivity_W_per_mK"], 12), tuple(fillers),
+            tuple(sorted(system.get("resistances_m2K_per_W", {}).items())))
 
 
 @dataclass(frozen=True)
@@ -425,6 +442,26 @@ class ShippedCorrections:
     @property
     def systems(self) -> dict[str, dict[str, Any]]:
         return dict(self.data["systems"])
+
+    def why_not_for(self, system: MaterialSystem, cheap: RVESpec) -> str:
+        """Empty where the table corrects ``cheap`` RVEs of ``system``; else one line why
+        not. A table without a recorded material system (the one shipped) holds for the
+        package's default system (the paper's)."""
+        recorded = self.provenance.get("material_system")
+        if recorded is None:
+            if not is_default_system(system):
+                return ("the shipped corrections hold for the paper's system (Al2O3 and AlN "
+                        "in silicone, Table 1 sizes)")
+        elif _solve_key(recorded) != _solve_key(system.to_dict()):
+            return (f"the corrections file was built for the material system "
+                    f"{recorded.get('name')!r} ({recorded.get('source')}), not this one")
+        built = {k: v for k, v in self.provenance.get("cheap_rve", {}).items()
+                 if k in RVESpec.field_names()}
+        if built and RVESpec.from_dict(built) != cheap:
+            return (f"the corrections correct a {built['box_um']:g} um cheap RVE at "
+                    f"{built['voxel_um']:g} um, not this one ({cheap.box_um:g} um at "
+                    f"{cheap.voxel_um:g} um)")
+        return ""
 
     def for_fractions(self, fractions: Mapping[str, float]) -> ShippedFactor | None:
         """The correction of a formulation (filler -> volume fraction), or None where it is

@@ -18,7 +18,7 @@ from dataclasses import replace
 
 from itr_surrogate.workload import Grid, Workload, expected_particles
 
-from .model import PARAMETRISATIONS, ForwardSettings, _specs, shipped_factor
+from .model import PARAMETRISATIONS, ForwardSettings, filler_specs, shipped_factor
 
 __all__ = ["identification_workload", "tables_workload", "TYPICAL_BASIS_SOLVES",
            "TYPICAL_ROUNDS"]
@@ -33,7 +33,7 @@ TYPICAL_ROUNDS = 2
 def _cheap_grid(settings: ForwardSettings, compositions: Mapping[str, Mapping[str, float]],
                 models: int, solves_per_model: int, *, basis_solves: int) -> Grid:
     rve = settings.rve
-    particles = max(expected_particles(rve, _specs(c, settings.psd_basis))
+    particles = max(expected_particles(rve, filler_specs(settings, c))
                     for c in compositions.values())
     return Grid("cheap RVEs", rve.box_um, rve.voxel_um, rves=models * settings.replicas,
                 solves=models * (solves_per_model + basis_solves), particles=particles,
@@ -52,7 +52,7 @@ def _faithful_grids(settings: ForwardSettings, compositions: Mapping[str, Mappin
         if fa.shipped and shipped_factor(settings, PARAMETRISATIONS["gap"], comp)[0]:
             continue
         spec = fa.spec_for(list(comp), settings.rve)
-        n = expected_particles(spec, _specs(comp, settings.psd_basis))
+        n = expected_particles(spec, filler_specs(settings, comp))
         for voxel in (fa.voxel_um, fa.coarse_voxel_um):
             entry = grids.setdefault((spec.box_um, voxel), [0, 0])
             entry[0] += 1

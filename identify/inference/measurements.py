@@ -34,9 +34,10 @@ from pathlib import Path
 
 import numpy as np
 
+from itr_fv.materials import default_system
 from itr_fv.materials.material_system import MaterialSystem
 
-from .formulations import formulation_name, fractions_of
+from .formulations import formulation_name, reader_for
 from .plausibility import (
     IMPEDANCE_SLIPS,
     check_auxiliary,
@@ -186,13 +187,13 @@ def _number(path: Path, line: int, row: dict, column: str, *, positive: bool = T
     return v
 
 
-def _formulation(path: Path, line: int, name: str, known) -> str:
+def _formulation(path: Path, line: int, name: str, known, system: MaterialSystem) -> str:
     """The canonical name of the formulation cell ``name`` (see
     :func:`~itr_identify.inference.formulations.formulation_name`)."""
     if not name:
         raise ValueError(f"{path.name} line {line}: empty formulation")
     try:
-        return formulation_name(name, known)
+        return formulation_name(name, known, system=system)
     except ValueError as exc:
         raise ValueError(f"{path.name} line {line}: {exc}") from None
 
@@ -214,10 +215,10 @@ def _finish(path: Path, values: dict[str, list[float]], source: str,
     return Measurements({k: np.array(v) for k, v in values.items()}, source, t, aux)
 
 
-def _known(formulations: set[str] | Callable[[str], object] | None
-           ) -> set[str] | Callable[[str], object]:
+def _known(formulations: set[str] | Callable[[str], object] | None,
+           system: MaterialSystem) -> set[str] | Callable[[str], object]:
     if formulations is None:
-        return fractions_of
+        return reader_for(system)
     return formulations if callable(formulations) else set(formulations)
 
 
@@ -234,12 +235,13 @@ def read_measurements(path: str | Path | None = None, *,
         row).
     formulations : set of str or callable, optional
         Names the table may use, or a function that raises ValueError for a name it does not
-        accept (default: :func:`itr_identify.inference.formulations.fractions_of`, the
-        command line's: Table 2 names and ``<filler>-<vol%>`` pairs). Matched in any letter
-        case; the result is keyed by the canonical spelling (``al2o3-55`` -> ``Al2O3-55``).
+        accept (default: :func:`itr_identify.inference.formulations.fractions_of` of
+        ``system``, the command line's: named formulations, ``<filler>-<vol%>`` and
+        ``<filler>-<wt%>wt`` parts). Matched in any letter case; the result is keyed by the
+        canonical spelling (``al2o3-55`` -> ``Al2O3-55``).
     system : MaterialSystem, optional
-        The phases whose densities bound a sample's density (default: the paper's system
-        with the handbook densities, :data:`itr_fv.materials.paper_data.PAPER_SYSTEM`).
+        The phases: their conductivities bound a measured k, their densities a sample's
+        density (default: the package's default system, the paper's).
 
     Raises
     ------
@@ -266,7 +268,8 @@ def read_measurements(path: str | Path | None = None, *,
     else:
         p = Path(path)
         text = _read_text(p)
-    known = _known(formulations)
+    system = system or default_system()
+    known = _known(formulations, system)
     values: dict[str, list[float]] = {}
     thickness: dict[str, list[float]] = {}
     seen: set[tuple[str, str]] = set()
@@ -275,13 +278,13 @@ def read_measurements(path: str | Path | None = None, *,
     aux_columns = [c for c in AUXILIARY_COLUMNS if c in rows[0][1]]
     auxiliary: dict[str, dict[str, list[float]]] = {c: {} for c in aux_columns}
     for line, row in rows:
-        name = _formulation(p, line, row["formulation"], known)
+        name = _formulation(p, line, row["formulation"], known, system)
         rep = row["replicate"]
         if (name, rep) in seen:
             raise ValueError(f"{p.name} line {line}: replicate {rep!r} of {name!r} given twice")
         seen.add((name, rep))
         k = _number(p, line, row, "k_W_per_mK")
-        check_conductivity(f"{p.name} line {line}", name, k)
+        check_conductivity(f"{p.name} line {line}", name, k, system=system)
         values.setdefault(name, []).append(k)
         if with_thickness:
             t = _number(p, line, row, THICKNESS_COLUMN)
@@ -339,18 +342,19 @@ def conductivity_from_impedance(thickness_m: np.ndarray,
 
 
 def read_tester_readings(path: str | Path, *,
-                         formulations: set[str] | Callable[[str], object] | None = None
-                         ) -> Measurements:
+                         formulations: set[str] | Callable[[str], object] | None = None,
+                         system: MaterialSystem | None = None) -> Measurements:
     """Tester readings (impedance vs thickness per sample) reduced to one K per replicate.
 
     Columns ``formulation,replicate,thickness_mm,impedance_K_mm2_per_W``; the rows of one
     (formulation, replicate) are one sample, in increasing thickness.
     """
     p = Path(path)
-    known = _known(formulations)
+    system = system or default_system()
+    known = _known(formulations, system)
     samples: dict[tuple[str, str], list[tuple[int, float, float]]] = {}
     for line, row in _rows(p, _read_text(p), READING_COLUMNS):
-        name = _formulation(p, line, row["formulation"], known)
+        name = _formulation(p, line, row["formulation"], known, system)
         t_mm = _number(p, line, row, "thickness_mm")
         check_thickness(f"{p.name} line {line}", t_mm)
         t = t_mm * 1e-3
@@ -372,7 +376,7 @@ def read_tester_readings(path: str | Path, *,
             raise ValueError(f"{p.name} line {pts[0][0]}: {name!r} replicate {rep!r}: "
                              f"{exc}") from None
         check_conductivity(f"{p.name} lines {pts[0][0]}-{pts[-1][0]}", name, k,
-                           column="K = 1/slope of impedance_K_mm2_per_W",
+                           system=system, column="K = 1/slope of impedance_K_mm2_per_W",
                            slips=IMPEDANCE_SLIPS, subject="impedance_K_mm2_per_W")
         values.setdefault(name, []).append(k)
     return _finish(p, values, str(p))

@@ -28,7 +28,8 @@ within a few 0.1 % of k over the range. Its prior (:class:`FilmPrior`) is unifor
 range of films (default 0-5 nm), integrated by :data:`FILM_NODES` Gauss-Legendre nodes.
 
 Each conductivity has a lognormal prior (:class:`InputPrior`: nominal value and relative standard
-deviation; :data:`DEFAULT_PRIORS` argued in ``docs/identification.md``). The posterior of
+deviation; :func:`default_priors`: the material system's, argued for the paper's in
+``docs/identification.md``). The posterior of
 the resistances with the inputs integrated out is a mixture over a Gauss-Hermite product
 grid of the inputs' log values (:data:`NODES` per input): each node a full calibration
 (:func:`~itr_identify.inference.calibrate.calibrate`, the same grid in R), weighted by its
@@ -54,14 +55,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from itr_fv.materials import paper_data
+from itr_fv.materials.material_system import MaterialSystem
 from itr_fv.materials.parameters import parse_parameter
 
 from ..forward.model import ForwardModel
 from .calibrate import Posterior, calibrate
 from .measurements import Measurements
 
-__all__ = ["InputPrior", "FilmPrior", "DEFAULT_PRIORS", "DEFAULT_FILM", "NODES", "ScaledModel",
+__all__ = ["InputPrior", "FilmPrior", "default_priors", "DEFAULT_FILM", "NODES", "ScaledModel",
            "elasticities", "marginalise", "default_priors", "narrowing"]
 
 #: Gauss-Hermite nodes per input (the matrix first; a filler's conductivity, whose
@@ -147,21 +148,15 @@ class FilmPrior:
 DEFAULT_FILM = FilmPrior()
 
 
-#: Relative standard deviations of the default priors (see ``docs/identification.md``):
-#: an unmeasured neat silicone (0.15-0.22 W/(m K) for the cured PDMS grades of gap fillers:
-#: 10 %), alumina powder (polycrystalline 20-40 W/(m K): 15 %), aluminium nitride powder
-#: (140-285 W/(m K) by purity and oxygen content: 25 %).
-DEFAULT_SD = {"silicone": 0.10, "Al2O3": 0.15, "AlN": 0.25}
-
-
-def default_priors(phases: Sequence[str]) -> dict[str, InputPrior]:
-    """The default prior of every phase of ``phases`` at the paper's conductivities."""
-    k = paper_data.PAPER_CONDUCTIVITY
-    return {f"k_{p}": InputPrior(f"k_{p}", float(k[p]), DEFAULT_SD.get(p, 0.25))
-            for p in phases}
-
-
-DEFAULT_PRIORS = default_priors(["silicone", "Al2O3", "AlN"])
+def default_priors(phases: Sequence[str], system: MaterialSystem) -> dict[str, InputPrior]:
+    """The default prior of every phase of ``phases``: the material system's nominal
+    conductivity and relative sd (:meth:`MaterialSystem.conductivity_sds`; the paper's
+    system: an unmeasured neat silicone 10 %, alumina powder 15 %, aluminium nitride powder
+    25 %, see ``docs/identification.md``; a system file's: its stated sd or range, else the
+    handbook's range)."""
+    k = system.conductivities()
+    sd = system.conductivity_sds()
+    return {f"k_{p}": InputPrior(f"k_{p}", float(k[p]), float(sd[p])) for p in phases}
 
 
 class ScaledModel:
@@ -193,9 +188,9 @@ def elasticities(models: Mapping[str, ForwardModel], values: Mapping[str, float]
     solves of the first replica at nominal and with k_f times :data:`ELASTICITY_STEP`, all to
     the relative residual :data:`ELASTICITY_TOL`; with ``film``, also ``film_nm``: d ln k_eff
     / d film (1/nm), the secant from film 0 to :data:`FILM_STEP_NM` on the same particles."""
-    k = paper_data.PAPER_CONDUCTIVITY
     out = {}
     for f, m in models.items():
+        k = m.settings.system.conductivities()
         own = {p: values[p] for p in m.parameters if p in values}
         base = float(m.solve_first(own, purpose="conductivity elasticity",
                                    tol=ELASTICITY_TOL).mean())
@@ -210,6 +205,15 @@ def elasticities(models: Mapping[str, ForwardModel], values: Mapping[str, float]
                                        film_m=FILM_STEP_NM * 1e-9).mean())
             out[f]["film_nm"] = math.log(thin / base) / FILM_STEP_NM
     return out
+
+
+def _system_of(models: Mapping[str, ForwardModel]) -> MaterialSystem:
+    """The one material system the models were built in (ValueError if they differ)."""
+    systems = {id(m.settings.system): m.settings.system for m in models.values()}
+    first = next(iter(systems.values()))
+    if any(s != first for s in systems.values()):
+        raise ValueError("models: built in different material systems")
+    return first
 
 
 def _nodes(priors: Sequence[InputPrior | FilmPrior]) -> tuple[np.ndarray, np.ndarray]:
@@ -233,7 +237,7 @@ def _nodes(priors: Sequence[InputPrior | FilmPrior]) -> tuple[np.ndarray, np.nda
 
 def marginalise(models: Mapping[str, ForwardModel], measurements: Measurements,
                 nominal: Posterior, priors: Mapping[str, InputPrior], *,
-                elasticity: Mapping[str, Mapping[str, float]], matrix: str = "silicone",
+                elasticity: Mapping[str, Mapping[str, float]],
                 n_samples: int = 4000, seed: int = 0, **calibrate_kw) -> tuple[Posterior, dict]:
     """The posterior with the conductivities of ``priors`` integrated out.
 
@@ -250,8 +254,6 @@ def marginalise(models: Mapping[str, ForwardModel], measurements: Measurements,
     elasticity : mapping
         :func:`elasticities` of the models (with ``film_nm`` where the film is integrated
         out).
-    matrix : str
-        The matrix phase.
 
     Returns
     -------
@@ -261,7 +263,9 @@ def marginalise(models: Mapping[str, ForwardModel], measurements: Measurements,
         variance of its log10 value (``shares``, summing to 1 with ``measurements``), and
         the nodes' weights.
     """
-    k0 = paper_data.PAPER_CONDUCTIVITY
+    system = _system_of(models)
+    k0 = system.conductivities()
+    matrix = system.matrix
     order = sorted(priors, key=lambda n: (isinstance(priors[n], FilmPrior),
                                           n != f"k_{matrix}", n))
     prs = [priors[n] for n in order]

@@ -28,7 +28,7 @@ import numpy as np
 from itr_fv.io import counted
 from itr_surrogate.engine import SolveEngine
 
-from ..forward.model import MATRIX, PARAMETRISATIONS, ForwardModel, ForwardSettings
+from ..forward.model import PARAMETRISATIONS, ForwardModel, ForwardSettings
 from .alone import fit_alone
 from .calibrate import Posterior, calibrate
 from .formulations import fractions_of
@@ -153,12 +153,14 @@ def identify(measurements: Measurements, parametrisation: str = "gap", *,
                          f"{parametrisation!r}")
     settings = settings or ForwardSettings()
     par = PARAMETRISATIONS[parametrisation]
-    comps = {f: fractions_of(f) for f in measurements.formulations}
+    system = settings.system
+    comps = {f: fractions_of(f, system) for f in measurements.formulations}
     singles = [f for f in comps if len(comps[f]) == 1]
     multis = [f for f in comps if len(comps[f]) > 1]
     faithful = settings.faithful if par.name == "gap" else None
     priors = marginalised_inputs(
-        default_inputs(sorted({MATRIX, *(x for f in comps.values() for x in f)}), settings)
+        default_inputs(sorted({system.matrix, *(x for f in comps.values() for x in f)}),
+                       settings)
         if inputs is None else inputs, contact=par.contact, settings=settings)
     film = any(isinstance(p, FilmPrior) for p in priors.values())
     rounds: list[dict] = []
@@ -192,7 +194,8 @@ def identify(measurements: Measurements, parametrisation: str = "gap", *,
         seconds["single-filler faithful corrections"] = time.perf_counter() - t
     t = time.perf_counter()
     central = post.central() if post is not None else {}
-    fixed_of = {f: {p: central[p] for p in par.parameters(list(comps[f])) if p in central}
+    fixed_of = {f: {p: central[p] for p in par.parameters(list(comps[f]), matrix=system.matrix)
+                    if p in central}
                 for f in multis}
     if multis:
         echo(f"  {par.name}: two-filler models ({len(multis)}), held at the single-filler "
@@ -263,9 +266,10 @@ def marginalised_inputs(inputs: Mapping[str, InputPrior | FilmPrior], *, contact
 
 def default_inputs(phases, settings: ForwardSettings) -> dict[str, InputPrior | FilmPrior]:
     """The inputs :func:`identify` marginalises by default: every phase's conductivity
-    (:func:`~itr_identify.inference.nuisance.default_priors`) and, where the settings state
-    no film, the film (:data:`~itr_identify.inference.nuisance.DEFAULT_FILM`)."""
-    out: dict[str, InputPrior | FilmPrior] = dict(default_priors(phases))
+    (:func:`~itr_identify.inference.nuisance.default_priors` of the settings' material
+    system) and, where the settings state no film, the film
+    (:data:`~itr_identify.inference.nuisance.DEFAULT_FILM`)."""
+    out: dict[str, InputPrior | FilmPrior] = dict(default_priors(phases, settings.system))
     if settings.rve.film_um is None and settings.rve.min_gap_um == 0:
         out[DEFAULT_FILM.name] = DEFAULT_FILM
     return out

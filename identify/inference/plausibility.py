@@ -9,8 +9,9 @@ tester samples). A value outside its range is asked about a unit (mW/(m K) for a
 conductivity, um or m for a thickness under a ``_mm`` column) only where that unit makes it
 plausible (:func:`itr_fv.checks.unit_slip`); otherwise the message states the range.
 
-The phase conductivities are the paper's (:data:`itr_fv.materials.paper_data.PAPER_CONDUCTIVITY`),
-the ones the identification solves with.
+The phase conductivities and densities are those of the material system the measurements
+are read against (:class:`~itr_fv.materials.material_system.MaterialSystem`), the ones the
+identification solves with.
 """
 
 from __future__ import annotations
@@ -20,7 +21,7 @@ from collections.abc import Mapping
 
 from itr_fv.analytic import hashin_shtrikman_multiphase
 from itr_fv.checks import slip_hint
-from itr_fv.materials import paper_data
+from itr_fv.materials.material_system import MaterialSystem
 
 from .formulations import fractions_of
 
@@ -43,23 +44,25 @@ CONDUCTIVITY_SLIPS = {"mW/(m K)": 1e-3}
 IMPEDANCE_SLIPS = {"K m^2/W": 1e-6, "K cm^2/W": 1e-2}
 
 
-def conductivity_range(formulation: str) -> tuple[float, float] | None:
-    """``(k_matrix, k_upper)`` in W/(m K) for ``formulation``: the matrix conductivity and
-    the Hashin-Shtrikman upper bound at perfect interfaces; None for a name that gives no
-    composition (a caller's own formulation set)."""
+def conductivity_range(formulation: str, system: MaterialSystem
+                       ) -> tuple[float, float] | None:
+    """``(k_matrix, k_upper)`` in W/(m K) for ``formulation`` of ``system``: the matrix
+    conductivity and the Hashin-Shtrikman upper bound at perfect interfaces (nominal
+    conductivities); None for a name that gives no composition (a caller's own formulation
+    set)."""
     try:
-        fillers = fractions_of(formulation)
+        fillers = fractions_of(formulation, system)
     except ValueError:
         return None
-    k = paper_data.PAPER_CONDUCTIVITY
-    matrix = paper_data.PAPER_SYSTEM.matrix
+    k = system.conductivities()
+    matrix = system.matrix
     fractions = [1.0 - sum(fillers.values()), *fillers.values()]
     conductivities = [k[matrix], *(k[f] for f in fillers)]
     return k[matrix], hashin_shtrikman_multiphase(fractions, conductivities)[1]
 
 
 def check_conductivity(where: str, formulation: str, k_W_per_mK: float, *,
-                       column: str = "k_W_per_mK",
+                       system: MaterialSystem, column: str = "k_W_per_mK",
                        slips: Mapping[str, float] = CONDUCTIVITY_SLIPS,
                        subject: str = "it") -> None:
     """Refuse a conductivity above what any resistance allows; warn below the matrix's.
@@ -76,6 +79,8 @@ def check_conductivity(where: str, formulation: str, k_W_per_mK: float, *,
         Its formulation name.
     k_W_per_mK : float
         The measured (or reduced) conductivity, W/(m K).
+    system : MaterialSystem
+        The phases of the formulation.
     column : str
         The column it came from, named in the message.
     slips : mapping of str to float
@@ -93,7 +98,7 @@ def check_conductivity(where: str, formulation: str, k_W_per_mK: float, *,
     ImplausibleMeasurementWarning
         Below the matrix conductivity.
     """
-    span = conductivity_range(formulation)
+    span = conductivity_range(formulation, system)
     if span is None:
         return
     k_matrix, k_upper = span
@@ -128,34 +133,32 @@ def check_thickness(where: str, thickness_mm: float, *, column: str = "thickness
 POWDER_SCALE_RANGE = (0.25, 4.0)
 
 
-def density_range(formulation: str, system=None) -> tuple[float, float] | None:
+def density_range(formulation: str, system: MaterialSystem) -> tuple[float, float] | None:
     """``(rho_min, rho_max)`` in g/cm^3 that a sample of ``formulation`` can have: any
     void-free mixture of its phases lies between the matrix's and the densest filler's
     density (a sample below its matrix's density would be more void than composite); None
     for a name that gives no composition or a system without densities."""
     try:
-        fillers = fractions_of(formulation)
+        fillers = fractions_of(formulation, system)
     except ValueError:
         return None
-    system = system or paper_data.PAPER_SYSTEM
     rho = system.densities(fillers)
     return rho[system.matrix], max(rho[f] for f in fillers)
 
 
-def powder_scale(formulation: str, d50_um: float, system=None) -> float:
+def powder_scale(formulation: str, d50_um: float, system: MaterialSystem) -> float:
     """The ratio of a powder's number-median diameter ``d50_um`` to the material system's
     (Table 1) for the single filler of ``formulation``."""
-    fillers = fractions_of(formulation)
+    fillers = fractions_of(formulation, system)
     if len(fillers) != 1:
         raise ValueError(f"d50_um: a size series needs a single-filler formulation, got "
                          f"{formulation!r}")
-    system = system or paper_data.PAPER_SYSTEM
     psd = system.filler(next(iter(fillers))).psd
     return float(d50_um) / float(psd.median_um)
 
 
 def check_auxiliary(where: str, formulation: str, column: str, value: float,
-                    system=None) -> float:
+                    system: MaterialSystem) -> float:
     """Refuse an auxiliary observable no sample of ``formulation`` can have (ValueError
     starting with ``where`` and naming the column); returns ``value``.
 

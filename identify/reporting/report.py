@@ -269,16 +269,21 @@ def selection_lines(idents: Mapping[str, Identification]) -> list[str]:
 
 
 def box_cut(settings, fillers=None) -> dict[str, float]:
-    """Volume fraction of each filler's Table 1 distribution above the largest diameter its
-    RVEs draw (``fillers``: those to give, default all of Table 1): the cut of
-    :func:`itr_fv.rve.size_cut`, the one that packs them."""
-    from itr_fv.rve import FillerSpec, size_cut
+    """Volume fraction of each filler's size distribution (of the settings' material
+    system) above the largest diameter its RVEs draw (``fillers``: those to give, default
+    all of the system's): the cut of :func:`itr_fv.rve.size_cut`, the one that packs
+    them."""
+    from itr_fv.rve import size_cut
+
+    from ..forward.model import filler_specs
 
     rve = settings.rve
-    return {f: size_cut(FillerSpec.from_table1(f, 0.5, basis=settings.psd_basis), rve.box_um,
-                        rve.voxel_um, tail_quantile=rve.tail_quantile,
-                        max_diameter_box_ratio=rve.max_diameter_box_ratio).volume_high
-            for f in paper_data.TABLE1 if fillers is None or f in fillers}
+    names = [f for f in settings.system.filler_names if fillers is None or f in fillers]
+    return {spec.material: size_cut(spec, rve.box_um, rve.voxel_um,
+                                     tail_quantile=rve.tail_quantile,
+                                     max_diameter_box_ratio=rve.max_diameter_box_ratio
+                                     ).volume_high
+            for spec in filler_specs(settings, {f: 0.5 for f in names})}
 
 
 def fillers_of(ident: Identification) -> set[str]:
@@ -304,7 +309,13 @@ def settings_lines(idents: Mapping[str, Identification], extra: Mapping[str, obj
                    ) -> list[str]:
     ident = next(iter(idents.values()))
     s = ident.settings
-    lines = [f"- RVE: {s.box_um:g} um box, {s.voxel_um:g} um voxels ({s.n}^3), "
+    system = s.system
+    sizes = "; ".join(f"{f.name}: {f.size_note or 'lognormal'}" for f in system.fillers)
+    lines = [f"- material system {system.name!r} ({system.source or 'default'}): "
+             f"{system.describe()}, relative sd "
+             + ", ".join(f"{p} {v:g}" for p, v in system.conductivity_sds().items())
+             + f"; sizes: {sizes}",
+             f"- RVE: {s.box_um:g} um box, {s.voxel_um:g} um voxels ({s.n}^3), "
              f"{s.replicas} replicas per formulation, packing seeds from {s.seed} "
              f"(seeds used: " + ", ".join(
                  f"{f} {m.seeds}" for f, m in ident.models.items()) + "; replica r packs "
@@ -313,7 +324,7 @@ def settings_lines(idents: Mapping[str, Identification], extra: Mapping[str, obj
              f"- largest particle diameter {s.max_diameter_box_ratio:g} x box "
              f"({s.max_diameter_box_ratio * s.box_um:.1f} um): the cut removes "
              + box_cut_phrase(s, fillers_of(ident))
-             + " of Table 1's distributions (replaced by smaller particles); conductivities "
+             + " of the size distributions (replaced by smaller particles); conductivities "
              + conductivities_used(ident),
              "- stated inputs: silicone film between touching particles "
              + (f"{1000 * s.rve.contact_film_um:g} nm (`--film-nm`, held)"

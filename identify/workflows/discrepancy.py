@@ -37,12 +37,12 @@ def run_discrepancy(meas: Measurements, settings: DiscrepancySettings, out: Path
     ``keep_fields`` as :func:`~itr_identify.workflows.reproduce.drop_fields`."""
     from tqdm.auto import tqdm
 
-    comps = {f: fractions_of(f) for f in meas.formulations}
+    comps = {f: fractions_of(f, settings.system) for f in meas.formulations}
     auxiliary_groups(meas, comps)          # an auxiliary column without its noise: refused now
     out = Path(out)
     begin_run(out, "discrepancy", folders=("solves",))
     singles = {f: c for f, c in comps.items() if len(c) == 1}
-    effects = default_effects() if effects is None else list(effects)
+    effects = default_effects(settings.system) if effects is None else list(effects)
     with open_engine(out, workers=workers, scheduler=scheduler, store=store,
                      echo=echo) as engine, \
             tqdm(total=n_solves(len(singles), settings, effects), desc="forward solves",

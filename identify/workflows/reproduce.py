@@ -22,11 +22,19 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 from itr_fv.io import atomic_path, counted, write_text
+from itr_fv.materials.material_system import MaterialSystem
 from itr_fv.run_folder import begin_run, write_manifest
 from itr_surrogate.engine import SolveEngine
 
-from ..forward.fidelity import CHEAP_REPLICAS, CHEAP_RVE, CHEAP_TOL, faithful_for, fidelity_name
-from ..forward.model import MATRIX, ForwardSettings
+from ..forward.fidelity import (
+    CHEAP_REPLICAS,
+    CHEAP_RVE,
+    CHEAP_TOL,
+    cheap_rve_for,
+    faithful_for,
+    fidelity_name,
+)
+from ..forward.model import ForwardSettings
 from ..inference.formulations import fractions_of
 from ..inference.measurements import Measurements, read_measurements
 from ..inference.pipeline import Identification, identify
@@ -60,7 +68,8 @@ class ReproduceSettings:
     seed: int = 0
     leave_one_out: bool = True
     #: (phase, relative sd) of the conductivities marginalised, beside the defaults of
-    #: :data:`itr_identify.inference.nuisance.DEFAULT_SD` (0 holds one at nominal)
+    #: the material system's (:meth:`~itr_fv.materials.material_system.MaterialSystem.
+    #: conductivity_sds`; 0 holds one at nominal)
     conductivity_sd: tuple[tuple[str, float], ...] = ()
 
     def input_priors(self, phases) -> dict:
@@ -76,9 +85,17 @@ class ReproduceSettings:
                 for n, p in default_inputs(sorted(phases), self.forward).items()}
 
     @classmethod
-    def at_fidelity(cls, level: str) -> "ReproduceSettings":
-        """Default settings at fidelity ``level`` (``quick``, ``standard``, ``paper``)."""
-        return cls(forward=cls().forward.with_(faithful=faithful_for(level)))
+    def at_fidelity(cls, level: str, system: MaterialSystem | None = None
+                    ) -> "ReproduceSettings":
+        """Default settings at fidelity ``level`` (``quick``, ``shipped``, ``standard``,
+        ``paper``) for ``system`` (default: the package's): its cheap RVE and faithful RVEs
+        from its powders (:func:`~itr_identify.forward.fidelity.cheap_rve_for`,
+        :func:`~itr_identify.forward.fidelity.faithful_for`; the paper's system: 12 um at
+        0.25 um and the levels' measured boxes)."""
+        forward = cls().forward
+        if system is not None:
+            forward = forward.with_(system=system, rve=cheap_rve_for(system))
+        return cls(forward=forward.with_(faithful=faithful_for(level, forward.system)))
 
     @property
     def fidelity(self) -> str:
@@ -177,7 +194,9 @@ def _identify_all(meas: Measurements, settings: ReproduceSettings, progress: boo
     for par in settings.parametrisations:
         echo(f"{par}: RVEs, reduced bases and RVE scatter of "
              f"{counted(len(meas.formulations), 'formulation')}")
-        phases = {MATRIX, *(f for name in meas.formulations for f in fractions_of(name))}
+        system = settings.forward.system
+        phases = {system.matrix, *(f for name in meas.formulations
+                                   for f in fractions_of(name, system))}
         idents[par] = identify(meas, par, settings=settings.forward,
                                grid_points=settings.grid_points, seed=settings.seed,
                                progress=progress, echo=echo, engine=engine,

@@ -61,14 +61,21 @@ def _paper_system() -> MaterialSystem:
     rho = {r["material"]: float(r["density_g_per_cm3"]) for r in read_table("densities")}
     (matrix,) = [r for r in rows if r["role"] == "matrix"]
     fillers = tuple(Filler(r["material"], float(r["k_W_per_mK"]),
-                           LogNormalPSD(*psd[r["material"]], "number"), rho.get(r["material"]))
+                           LogNormalPSD(*psd[r["material"]], "number"), rho.get(r["material"]),
+                           conductivity_sd=float(r["rel_sd"]),
+                           size_note="lognormal mu/sigma, number basis (Table 1)")
                     for r in rows if r["role"] == "filler")
+    named = tuple((name, tuple(sorted(parts.items())))
+                  for name, parts in formulations().items())
     return MaterialSystem(matrix["material"], float(matrix["k_W_per_mK"]), fillers,
-                          rho.get(matrix["material"]))
+                          rho.get(matrix["material"]),
+                          matrix_conductivity_sd=float(matrix["rel_sd"]), named=named,
+                          name="paper", source="the package's tables of the paper")
 
 
 #: The paper's material system: silicone 0.18 W/(m K) with Al2O3 (30) and AlN (200) of the
-#: Table 1 size distributions (the hybrids are simulated at these fixed values).
+#: Table 1 size distributions (the hybrids are simulated at these fixed values), Table 2's
+#: formulations by name. The package's default system (:func:`itr_fv.materials.default_system`).
 PAPER_SYSTEM = _paper_system()
 #: The conductivities the paper simulates with, W/(m K) (a view of :data:`PAPER_SYSTEM`).
 PAPER_CONDUCTIVITY = PAPER_SYSTEM.conductivities()

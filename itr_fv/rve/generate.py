@@ -51,7 +51,7 @@ import numpy as np
 from scipy import special
 
 from ..checks import finite_number as _num
-from ..materials.paper_data import TABLE1
+from ..materials.paper_data import psd_lognormal
 from ..materials.psd import (
     LogNormalPSD,
     fit_sample,
@@ -119,12 +119,15 @@ class FillerSpec:
 
     @classmethod
     def from_table1(cls, material: str, volume_fraction: float, **kwargs: object) -> "FillerSpec":
-        """Filler with the paper's Table 1 distribution (``"Al2O3"`` or ``"AlN"``)."""
-        if material not in TABLE1:
+        """Filler with the paper's Table 1 distribution (``"Al2O3"`` or ``"AlN"``): a
+        shorthand for scripts and tests; the package's own code takes a filler's sizes from
+        its material system."""
+        table1 = psd_lognormal()
+        if material not in table1:
             raise ValueError(f"material: unknown filler {material!r} (Table 1 has "
-                             f"{sorted(TABLE1)})")
-        p = TABLE1[material]
-        return cls(material, p.mu, p.sigma, volume_fraction, **kwargs)  # type: ignore[arg-type]
+                             f"{sorted(table1)})")
+        mu, sigma = table1[material]
+        return cls(material, mu, sigma, volume_fraction, **kwargs)  # type: ignore[arg-type]
 
     @property
     def psd(self) -> LogNormalPSD:

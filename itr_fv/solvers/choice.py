@@ -35,8 +35,8 @@ from .backends import Backend, available_backends, backend_for
 from .devices import cuda_device_count, require_cuda
 
 __all__ = ["SolverChoice", "SOLVERS", "DEFAULT_SOLVER", "DEFAULT_DEVICE", "DEVICES",
-           "check_solver", "resolve_solver", "solver_choice", "solver_backend", "solvers_for",
-           "worker_resources", "needs_gpu"]
+           "default_solver", "other_device_solver", "check_solver", "resolve_solver",
+           "solver_choice", "solver_backend", "solvers_for", "worker_resources", "needs_gpu"]
 
 #: Where a solve may run.
 DEVICES = ("cpu", "cuda", "auto")
@@ -102,9 +102,25 @@ SOLVERS = _registry(
 )
 
 
+def default_solver() -> str:
+    """The solver of every setting, request and command that names none
+    (:data:`DEFAULT_SOLVER`): the one place the default is read; settings take it as their
+    field's default (``field(default_factory=default_solver)``)."""
+    return DEFAULT_SOLVER
+
+
+def other_device_solver(choice: str | None) -> str:
+    """The solver of the same method on the other device: ``"gpu"`` for a CPU choice, the
+    default CPU solver for a CUDA one (what a plan says the other device would take)."""
+    return DEFAULT_SOLVER if solver_choice(choice).device == "cuda" else "gpu"
+
+
 def check_solver(choice: object, name: str = "solver") -> str:
-    """``choice`` if it names a solver (a short name, ``"auto"`` or a registered backend),
-    else a ValueError naming the argument ``name`` and the choices."""
+    """``choice`` if it names a solver (a short name, ``"auto"`` or a registered backend;
+    None: :func:`default_solver`), else a ValueError naming the argument ``name`` and the
+    choices."""
+    if choice is None:
+        return DEFAULT_SOLVER
     if isinstance(choice, str) and (choice in SOLVERS or choice == "auto"
                                     or choice in available_backends()):
         return choice  # (the short names first: no scan of the installed backends)
@@ -173,9 +189,10 @@ def solvers_for(device: str) -> tuple[str, ...]:
     return tuple(n for n, c in SOLVERS.items() if c.device == device)
 
 
-def solver_choice(choice: str, argument: str = "solver") -> SolverChoice:
+def solver_choice(choice: str | None, argument: str = "solver") -> SolverChoice:
     """The :class:`SolverChoice` of a resolved name (a registered backend name stands for
-    itself, on the CPU); a ValueError naming ``argument`` for an unknown one."""
+    itself, on the CPU; None: :func:`default_solver`); a ValueError naming ``argument`` for
+    an unknown one."""
     choice = check_solver(choice, argument)
     if choice == "auto":
         choice = resolve_solver("auto", "cpu")
