@@ -114,9 +114,7 @@ class Repacker:
                              f"({sorted(fr)})")
         out = []
         for f, v in fr.items():
-            psd = self.system.filler(f).psd
-            basis = self.basis if psd.basis == "number" else psd.basis
-            spec = FillerSpec(f, psd.mu, psd.sigma, v, basis=basis)
+            spec = FillerSpec.of(f, self.system.filler(f).psd, v, number_read_as=self.basis)
             s = scale.get(f, 1.0)
             if not (isinstance(s, (int, float)) and math.isfinite(s) and s > 0):
                 raise ValueError(f"median_scale[{f!r}]: expected a factor > 0, got {s!r}")

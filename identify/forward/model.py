@@ -217,12 +217,8 @@ def filler_specs(settings: ForwardSettings, fractions: Mapping[str, float]) -> l
     them: the size distributions of ``settings.system``. ``settings.psd_basis`` ``"volume"``
     reads a number-basis statement as volume-weighted (the basis question of the paper's
     Table 1); a statement in the volume basis is taken as stated."""
-    out = []
-    for f, v in fractions.items():
-        psd = settings.system.filler(f).psd
-        basis = settings.psd_basis if psd.basis == "number" else psd.basis
-        out.append(FillerSpec(f, psd.mu, psd.sigma, v, basis=basis))
-    return out
+    return [FillerSpec.of(f, settings.system.filler(f).psd, v,
+                          number_read_as=settings.psd_basis) for f, v in fractions.items()]
 
 
 def shipped_factor(settings: ForwardSettings, parametrisation: Parametrisation,

@@ -156,8 +156,8 @@ def scatter_note(settings: "DemoSettings") -> str:
 
 def _filler(settings: DemoSettings):
     from itr_fv.rve import FillerSpec
-    psd = settings.system.filler(settings.filler).psd
-    return FillerSpec(settings.filler, psd.mu, psd.sigma, settings.fraction, basis=psd.basis)
+    return FillerSpec.of(settings.filler, settings.system.filler(settings.filler).psd,
+                         settings.fraction)
 
 
 def demo_workload(settings: DemoSettings):

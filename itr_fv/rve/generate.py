@@ -129,6 +129,15 @@ class FillerSpec:
         mu, sigma = table1[material]
         return cls(material, mu, sigma, volume_fraction, **kwargs)  # type: ignore[arg-type]
 
+    @classmethod
+    def of(cls, material: str, psd: LogNormalPSD, volume_fraction: float, *,
+           number_read_as: str = "number") -> "FillerSpec":
+        """Filler of a stated size distribution (a material system's): a volume-basis
+        statement as stated; a number-basis one read in ``number_read_as`` (the basis
+        question of the paper's Table 1, ``ForwardSettings.psd_basis``)."""
+        basis = number_read_as if psd.basis == "number" else psd.basis
+        return cls(material, psd.mu, psd.sigma, volume_fraction, basis=basis)
+
     @property
     def psd(self) -> LogNormalPSD:
         """Number-weighted distribution of the diameters (um)."""
