@@ -223,10 +223,16 @@ def test_discrepancy_command_end_to_end(tmp_path, capsys):
              str(tmp_path / "shared")]
     assert main(["discrepancy", str(csv), "--out", str(out), *flags]) == 0
     data = json.loads((out / "discrepancy.json").read_text())
-    assert data["verdict"] == "named"
+    # the data pull the matrix to its truth, 0.30; the paper's system states 0.18 with a
+    # relative sd of 10 %, and 0.30 is five of those away: not "the input is off" but "the
+    # model lacks something" (issue 49)
+    assert data["verdict"] == "unexplained"
     best = data["candidates"][0]
+    assert best["name"] == "matrix conductivity off nominal"
     lo, hi = best["interval_90"]
-    assert lo <= 0.30 <= hi
+    assert lo <= 0.30 <= hi and lo > 0.18 * math.exp(3 * 0.10)
+    assert best["log_bayes_factor"] > data["threshold"]["log_bayes_factor"]
+    assert "the model lacks something" in data["statement"]
     md = (out / "discrepancy.md").read_text()
     assert "matrix conductivity off nominal" in md and "Al2O3-60" in md
     # the densities in the likelihood and the report, the phase densities stated
@@ -236,7 +242,7 @@ def test_discrepancy_command_end_to_end(tmp_path, capsys):
     assert (out / "discrepancy.png").stat().st_size > 1000
     files = {f["path"] for f in json.loads((out / "manifest.json").read_text())["files"]}
     assert files >= {"discrepancy.md", "discrepancy.json", "discrepancy.png"}
-    assert "discrepancy: named" in capsys.readouterr().out
+    assert "discrepancy: unexplained" in capsys.readouterr().out
     # another table, another output folder, the same store: no full solve again
     other = tmp_path / "other.csv"
     other.write_text("formulation,replicate,k_W_per_mK\n" + "".join(
@@ -326,32 +332,3 @@ def test_implausible_resistances_and_grid_ends_are_reported():
                            "solved grid; 0.045x the paper's 2.2e-08)")
     # plausible values: nothing to say
     assert resistance_remarks(fit(R_Al2O3_silicone=2e-8, R_AlN_silicone=3e-8), SETTINGS) == []
-
-
-def test_a_thickness_trend_supports_the_tester_candidate_below_the_bic_margin():
-    from itr_identify.discrepancy.decision import Discrepancy, _decide, thickness_trend
-    from itr_identify.discrepancy.fit import Group, ModelFit
-
-    rng = np.random.default_rng(1)
-    groups, measured = [], []
-    for f, phi in (("Al2O3-50", 0.5), ("Al2O3-55", 0.55), ("Al2O3-60", 0.6)):
-        for t_mm in (0.5, 1.0, 1.5):
-            k = (1.0 + 2 * phi) * (1 - 0.04 * (1.5 - t_mm)) + rng.normal(0, 0.004)
-            groups.append(Group(f, "Al2O3", phi, t_mm * 1e-3, k, 0.01, 4))
-            measured.append(k)
-    measured = np.array(measured)
-    flat = np.array([(1.0 + 2 * g.fraction) * 0.98 for g in groups])   # no thickness term
-    tester = ModelFit(fx.TesterContact().name, {"R_Al2O3_silicone": 2e-8,
-                                                fx.TesterContact().parameter: 1e-5},
-                      (5e-6, 1.5e-5), measured + rng.normal(0, 0.004, measured.size),
-                      np.full(measured.size, 1e-4), 0.0, 9.0, 100.0, 2,
-                      n_observations=measured.size)
-    base = ModelFit("base", {"R_Al2O3_silicone": 2e-8}, None, flat,
-                    np.full(measured.size, 1e-4), 0.0, 30.0, 103.0, 1,
-                    n_observations=measured.size)
-    assert thickness_trend(groups, base)[2] < 1e-3 < thickness_trend(groups, tester)[2]
-    d = Discrepancy("none", "", groups, base, [tester], {}, 1e-4, [], [],
-                    [fx.TesterContact()])
-    _decide(d, SETTINGS)                     # BIC lower by 3 only (< the margin of 6)
-    assert d.verdict == "named" and d.winner is tester, d.statement
-    assert "trend with the sample thickness" in d.statement

@@ -48,18 +48,17 @@ def test_noise_alone_names_nothing(study):
     ("tester", "tester contact resistance left in the data", 4e-5)])
 def test_library_effects_are_named_with_the_truth_inside(study, case, name, value):
     c = _rows(study, "aux")[case]
-    # at this size (five formulations) density alone may leave 3 % voids tied with a 2 %
-    # fraction loss (the mass fraction would part them): the truth leads either way
-    ok = ("named", "tie") if case == "porosity" else ("named",)
-    assert c["verdict"] in ok and c["winner"] == name, c["statement"]
+    # issue 49: the acceptance as first written (issue 25), restored before the calibrated
+    # rule's results were seen: named (not a tie), the gap there before and closed after
+    assert c["verdict"] == "named" and c["winner"] == name, c["statement"]
     lo, hi = c["interval_90"]
     assert lo <= value <= hi
-    # the gap closes (the density groups, matched by both, dilute the tester's chi-square
-    # per degree of freedom; its thickness trend is what names it)
-    assert c["chi2_dof_after"] < min(c["chi2_dof_before"], 2.0)
-    assert c["chi2_dof_before"] > 1.5
+    assert c["chi2_dof_before"] > 2.0 and c["chi2_dof_after"] < 2.0
 
 
+@pytest.mark.xfail(strict=True, reason=(
+    "issue 49: restored as first written (one measurement, density or the mass fraction, "
+    "decides); the workflow names density + powder; a miss reported, not loosened"))
 def test_porosity_absorbed_on_k_alone_is_tied_and_density_decides(study):
     """k alone: 3 % voids hide in the resistances; the tied set holds porosity and the
     measurement named to decide is one that tells voids from their absence (density or
@@ -67,7 +66,7 @@ def test_porosity_absorbed_on_k_alone_is_tied_and_density_decides(study):
     c = _rows(study, "k")["porosity"]
     assert c["verdict"] != "named", c["statement"]
     assert "porosity (air voids)" in c["tied"] and c["truth_in_tied"]
-    assert c["deciding"].split(" + ")[0] in ("density", "mass_fraction")
+    assert c["deciding"] in ("density", "mass_fraction")
     assert c["deciding_separates_truth"]
 
 

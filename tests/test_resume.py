@@ -175,7 +175,10 @@ def test_workers_and_an_external_scheduler_give_the_serial_numbers(serial_reprod
                 p.kill()
 
 
+@pytest.mark.slow
 def test_discrepancy_killed_part_way_redoes_no_finished_solve(tmp_path, capsys):
+    # slow (about 5 min on 2 cores): the same solve engine and store as the reproduce
+    # test above it in the default run, which kills and resumes a run end to end
     table = tmp_path / "m.csv"
     table.write_text("formulation,replicate,k_W_per_mK\n" + "".join(
         f"{f},{i + 1},{k}\n" for f, ks in (("Al2O3-55", (1.21, 1.25, 1.23)),

@@ -66,7 +66,7 @@ from itr_identify.discrepancy.decision import find_discrepancy
 from itr_identify.discrepancy.settings import DiscrepancySettings
 from itr_identify.discrepancy.synthetic import paper_noise
 from itr_identify.discrepancy.tables import build_tables, n_solves
-from itr_identify.forward.fidelity import FaithfulRVE
+from itr_identify.forward.fidelity import FaithfulRVE, faithful_for
 from itr_identify.forward.model import ForwardSettings
 from itr_identify.inference.formulations import fractions_of
 from itr_identify.inference.measurements import Measurements, read_measurements
@@ -100,7 +100,7 @@ SIZES = {
                ("matrix", "porosity", "fraction", "tester"), 14.0, 0.25,
                ("null", "porosity", "tester")),
     "full": Size(("Al2O3-55", "Al2O3-58", "Al2O3-60", "Al2O3-65", "AlN-55", "AlN-58",
-                  "AlN-60", "AlN-62"), DiscrepancySettings(),
+                  "AlN-60", "AlN-62"), DiscrepancySettings(faithful=faithful_for("standard")),
                  LIBRARY + STEEPENING, 28.0, 0.2,
                  ("null",) + LIBRARY + ("agglomeration", "films", "width")),
 }

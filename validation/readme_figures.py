@@ -10,7 +10,9 @@ and ``<!-- /readme-figures -->``, and the figures of the result files the README
 issue 47 (the shipped data's headline, the box study, the contact films, the recovery)
 between ``<!-- result-figures -->`` and ``<!-- /result-figures -->``, and those of issue 48
 (the paper's system as a file, the second system) between ``<!-- system-figures -->`` and
-``<!-- /system-figures -->``; nothing there is typed by hand. ``all`` does both.
+``<!-- /system-figures -->``, and those of issue 49 (the discrepancy workflow's naming rule
+and Table 3's verdict) between ``<!-- discrepancy-figures -->`` and
+``<!-- /discrepancy-figures -->``; nothing there is typed by hand. ``all`` does both.
 Options: ``--skip-tests`` (keep the recorded test figures), ``--skip-reproduce``.
 """
 
@@ -38,6 +40,8 @@ README = ROOT / "README.md"
 BEGIN, END = "<!-- readme-figures -->", "<!-- /readme-figures -->"
 RESULTS_BEGIN, RESULTS_END = "<!-- result-figures -->", "<!-- /result-figures -->"
 SYSTEM_BEGIN, SYSTEM_END = "<!-- system-figures -->", "<!-- /system-figures -->"
+DISCREPANCY_BEGIN, DISCREPANCY_END = ("<!-- discrepancy-figures -->",
+                                      "<!-- /discrepancy-figures -->")
 ITR = [sys.executable, "-m", "itr_identify.cli"]
 
 
@@ -259,6 +263,41 @@ def system_block() -> str:
     return " ".join(parts) + " Written by `validation/readme_figures.py` from those files."
 
 
+def discrepancy_block() -> str:
+    """The README's figures of issue 49: the naming rule's false-naming rate and power on
+    truths the workflow does not share (``discrepancy_calibration.json``) and Table 3's
+    verdict at the default settings (``discrepancy.json``)."""
+    parts = []
+    cal = _json("discrepancy_calibration.json")
+    if cal:
+        s = cal["summary"]
+        study = {c: v for c, v in s["power"].items()}
+        powers = "; ".join(f"{c} " + ", ".join(f"{size} {share:.0%}"
+                                                for size, share in p.items())
+                           for c, p in study.items())
+        parts.append(
+            f"On truths the workflow does not share (28 um / 0.2 um, other packings, effects "
+            f"built with the public API; the base at the `standard` level the truths' box "
+            f"matches), an effect was named on {s['false_named']} of {s['test_tables']} "
+            f"noise-only tables ({s['false_naming_rate']:.0%}; target at most 5 %), the "
+            f"base model's chi-square per degree of freedom there was "
+            f"{s['null_chi_square_over_dof']:.2f}, and {s['effects_named_at_study_size']} of "
+            f"7 library effects were named with the truth inside the 90 % interval at their "
+            f"study size in at least half of 10 noise seeds (target 6). Share of seeds "
+            f"named, by size: {powers} (`validation/results/discrepancy_calibration.md`).")
+    t3 = _json("discrepancy.json")
+    if t3 and t3.get("threshold"):
+        base = t3["base"]["parameters"]
+        rs = ", ".join(f"{k} {v:.2g}" for k, v in base.items() if k.startswith("R_"))
+        parts.append(
+            f"On Table 3 at the default (shipped) level: **{t3['verdict']}**, base "
+            f"chi-square {t3['base']['chi_square']:.1f} on {t3['base']['dof']} dof, base "
+            f"resistances {rs} m^2 K/W, naming threshold "
+            f"{t3['threshold']['log_bayes_factor']:.2f} "
+            f"(`validation/results/discrepancy.md`).")
+    return " ".join(parts) + " Written by `validation/readme_figures.py` from those files."
+
+
 def _replace(path: Path, begin: str, end: str, text: str) -> None:
     doc = path.read_text()
     if begin not in doc or end not in doc:
@@ -273,6 +312,7 @@ def write(data: dict) -> None:
     _replace(README, BEGIN, END, block(data))
     _replace(README, RESULTS_BEGIN, RESULTS_END, results_block())
     _replace(README, SYSTEM_BEGIN, SYSTEM_END, system_block())
+    _replace(README, DISCREPANCY_BEGIN, DISCREPANCY_END, discrepancy_block())
 
 
 def main() -> None:

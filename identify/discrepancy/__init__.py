@@ -16,12 +16,16 @@
 3. **Disagreement** (:mod:`.decision`). The base model's chi-square against its degrees of
    freedom (p-value), standardised residuals per group and their structure: trend with the
    filler fraction per filler, offset between fillers, trend with the thickness.
-4. **Selection** (:mod:`.decision`). Candidates ranked by BIC, ``-2 ln L_max + p ln n``.
-   One is *named* when it lowers the BIC by :attr:`.settings.DiscrepancySettings.bic_margin`
-   or more, leaves no significant residual and needs no resistance at the edge of its
-   range; two within :attr:`.settings.DiscrepancySettings.tie_margin` of each other are
-   reported as a *tie* with the measurement that separates them; a significant base
-   residual that no candidate removes is an *unexplained* discrepancy.
+4. **Selection** (:mod:`.decision`). Candidates ranked by their log Bayes factor over the
+   base model (:attr:`.fit.ModelFit.log_evidence`: the likelihood integrated over the
+   resistances and the effect's prior). One is *named* when it exceeds the threshold
+   calibrated on the table (:mod:`.calibration`: the quantile of the largest log Bayes
+   factor on noise-only tables drawn from the base model that keeps false naming at
+   :attr:`.settings.DiscrepancySettings.false_naming_rate`), leaves no significant residual,
+   needs no resistance at the edge of its grid and does not pull a stated input beyond three
+   of its sds; candidates close to it are a *tie* with the measurement that separates them;
+   a significant base residual that no candidate removes is an *unexplained* discrepancy.
+   The result is frozen (:class:`.outcome.Discrepancy`).
 
 Two-filler formulations are left out (their forward table would need a grid over both
 resistances); the report lists them. :mod:`.settings` holds the workflow's settings,

@@ -4,7 +4,7 @@ The forward tables are solved on the cheap RVE; their level is corrected to the 
 fidelity once per formulation, without any effect (:mod:`.tables`). An effect can change
 that correction: solid contact spots, for one, conduct differently through a contact drawn
 at another voxel. :func:`corrector` returns the step that, for the candidates that would be
-named (a BIC gain of the margin or more over the base model), solves the faithful packings
+named (a log Bayes factor over the naming threshold), solves the faithful packings
 of every formulation with the effect switched on at the candidate's best value and
 resistance (both voxels, the voxel bias extrapolated away, on the solve engine and in its
 store), replaces that candidate's level by the corrected one and refits it. The table value
@@ -14,8 +14,8 @@ it is compared with is the first replica's at that point times the replica facto
 from __future__ import annotations
 
 import warnings
-from collections.abc import Callable
-from dataclasses import replace
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -25,21 +25,22 @@ from itr_surrogate.engine import RVEData, SolveEngine, SolveRequest
 from ..forward.fidelity import Correction
 from ..forward.model import PARAMETRISATIONS, ForwardModel, filler_specs
 from ..inference.formulations import fractions_of
-from .fit import Group, evaluate, fit_model
-from .outcome import Discrepancy
+from .effect import Effect
+from .fit import Group, ModelFit, evaluate, fit_model
+from .observables import AuxGroup
 from .steepening import Repacker
-from .tables import resistance_name
+from .tables import ForwardTables, resistance_name
 
-__all__ = ["corrector", "effect_correction"]
+__all__ = ["Corrected", "corrector", "effect_correction"]
 
 
-def effect_correction(d: Discrepancy, effect, value: float,
+def effect_correction(tables: ForwardTables, effect, value: float,
                       resistances: dict[str, float], formulation: str,
                       engine: SolveEngine, tick: Callable[[], None] | None = None
                       ) -> Correction:
     """The faithful correction of ``formulation``'s table level with ``effect`` at
     ``value`` and the given resistances (full solves on the faithful packings)."""
-    st = d.tables.settings
+    st = tables.settings
     fa = st.faithful
     comp = fractions_of(formulation, st.system)
     (filler, phi), = comp.items()
@@ -68,7 +69,7 @@ def effect_correction(d: Discrepancy, effect, value: float,
     k = np.array([r.k_diagonal for r in results])
     g = Group(formulation, filler, phi, None, 1.0, 1.0, 1)
     params = {r_name: resistances[r_name], effect.parameter: float(value)}
-    k_table = evaluate(_uncorrected(d.tables), effect, params, [g])[0][0]
+    k_table = evaluate(_uncorrected(tables), effect, params, [g])[0][0]
     return Correction({r_name: resistances[r_name]}, fa.box_for([filler]), fa.voxel_um,
                       fa.coarse_voxel_um, seeds, float(k_table), k[0::2], k[1::2])
 
@@ -80,28 +81,44 @@ def _uncorrected(tables):
 
 
 def corrector(engine: SolveEngine, *, tick: Callable[[], None] | None = None
-              ) -> Callable[[Discrepancy], None]:
+              ) -> Callable[..., "Corrected"]:
     """The step :func:`~.decision.find_discrepancy` takes before deciding (its ``correct``):
-    every solved candidate that lowers the BIC by the margin or more is refitted with its
-    level corrected at its best point; the corrections are kept in the tables
-    (:attr:`~.tables.ForwardTables.effect_corrections`) and listed in
-    :attr:`~.decision.Discrepancy.corrected_at_best`."""
-    def correct(d: Discrepancy) -> None:
-        st = d.tables.settings
+    every solved candidate whose log Bayes factor exceeds the naming threshold is refitted
+    with its level corrected at its best point. It returns a :class:`Corrected`: new
+    tables holding the corrections (:attr:`~.tables.ForwardTables.effect_corrections`),
+    the refitted candidates and the factors; the tables it was given are not changed."""
+    def correct(tables: ForwardTables, groups: Sequence[Group], aux: Sequence[AuxGroup],
+                base: ModelFit, fits: Sequence[ModelFit], effects: Sequence[Effect],
+                threshold: float) -> Corrected:
+        st = tables.settings
         if st.faithful is None:
-            return
-        for n, m in enumerate(list(d.candidates)):
-            e = next(x for x in d.effects if x.name == m.name)
+            return Corrected(tables, list(fits), {})
+        found: dict = {}
+        chosen = []
+        for m in fits:
+            e = next(x for x in effects if x.name == m.name)
             value = m.parameters[e.parameter]
-            if (not e.solved or d.base.bic - m.bic < st.bic_margin or m.at_grid_edge
-                    or value == e.nominal):
+            if (not e.solved or m.log_evidence - base.log_evidence <= threshold
+                    or m.at_grid_edge or value == e.nominal):
                 continue
-            forms = sorted({g.formulation for g in d.groups})
-            for f in forms:
-                d.tables.effect_corrections[(e.name, f)] = effect_correction(
-                    d, e, value, m.parameters, f, engine, tick)
-            d.corrected_at_best[e.name] = {
-                f: d.tables.effect_corrections[(e.name, f)].factor for f in forms}
-            d.candidates[n] = fit_model(d.tables, d.groups, e, d.aux)
-        d.candidates.sort(key=lambda x: x.bic)
+            chosen.append(e)
+            for f in sorted({g.formulation for g in groups}):
+                found[(e.name, f)] = effect_correction(tables, e, value, m.parameters, f,
+                                                       engine, tick)
+        corrected = replace(tables, effect_corrections={**tables.effect_corrections, **found})
+        refit = {e.name: fit_model(corrected, groups, e, aux) for e in chosen}
+        factors = {e.name: {f: c.factor for (name, f), c in found.items() if name == e.name}
+                   for e in chosen}
+        return Corrected(corrected, [refit.get(m.name, m) for m in fits], factors)
     return correct
+
+
+@dataclass(frozen=True)
+class Corrected:
+    """What :func:`corrector` returns: the tables with the best-point corrections, the
+    candidates (those corrected refitted) and, per corrected candidate, each formulation's
+    correction factor."""
+
+    tables: ForwardTables
+    fits: list[ModelFit]
+    factors: dict[str, dict[str, float]]

@@ -1,27 +1,30 @@
 """The disagreement between the base model and the measurements (chi-square, residual
-structure) and the selection among the candidates (BIC, tie, unexplained): the workflow's
-verdict (:func:`find_discrepancy`)."""
+structure) and the selection among the candidates (a Bayes factor over a calibrated
+threshold, tie, unexplained): the workflow's verdict (:func:`find_discrepancy`, frozen)."""
 
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy import stats
 
 from ..inference.formulations import fractions_of
 from ..inference.measurements import Measurements
+from .best_point import Corrected
+from .calibration import NamingThreshold, calibrate_threshold
 from .deciding import deciding_set, rank_measurements, tied_set, unseparated
 from .effects import Effect
 from .fit import Group, ModelFit, fit_model, groups_of
-from .model_form import AMPLITUDE_RANGE, fit_model_form, leave_one_out
+from .model_form import AMPLITUDE_RANGE, LeaveOneOut, ModelFormFit, fit_model_form, leave_one_out
 from .observables import auxiliary_groups
 from .outcome import Discrepancy, _short
 from .settings import DiscrepancySettings
 from .tables import ForwardTables, build_tables
 
-__all__ = ["Discrepancy", "find_discrepancy", "residual_structure", "resistance_remarks",
-           "thickness_trend"]
+__all__ = ["Discrepancy", "Verdict", "decide", "find_discrepancy", "residual_structure",
+           "resistance_remarks", "thickness_trend"]
 
 
 def residual_structure(groups: Sequence[Group], fit: ModelFit) -> list[str]:
@@ -63,29 +66,26 @@ def thickness_trend(groups: Sequence[Group], fit: ModelFit
     return float(res.slope), float(res.stderr), float(res.pvalue)
 
 
-def _explains_thickness_trend(d: "Discrepancy", st: DiscrepancySettings
-                              ) -> tuple[list[ModelFit], str]:
-    """The thickness-dependent candidates (a tester effect) that a significant thickness
-    trend of the base residuals supports: a trend no RVE effect can make (an RVE does not
-    know the sample's thickness), which the candidate removes while fitting better than
-    the base. Returns them and the sentence that says so."""
-    base = thickness_trend(d.groups, d.base)
-    if base is None or base[2] >= st.significance:
-        return [], ""
-    needs = {e.name for e in d.effects if e.needs_thickness}
-    out, words = [], []
-    for m in d.candidates:
-        after = thickness_trend(d.groups, m)
-        if (m.name in needs and m.bic < d.base.bic and after is not None
-                and after[2] >= st.significance):
-            out.append(m)
+def _thickness_remark(groups: Sequence[Group], base: ModelFit,
+                      candidates: Sequence[ModelFit], effects: Sequence[Effect],
+                      st: DiscrepancySettings) -> str:
+    """A sentence on a significant thickness trend of the base residuals (which no RVE
+    effect can make: an RVE does not know the sample's thickness) and the
+    thickness-dependent candidates that remove it; empty without one. A remark only: the
+    verdict is the Bayes factor's."""
+    trend = thickness_trend(groups, base)
+    if trend is None or trend[2] >= st.significance:
+        return ""
+    needs = {e.name for e in effects if e.needs_thickness}
+    words = []
+    for m in candidates:
+        after = thickness_trend(groups, m)
+        if m.name in needs and after is not None and after[2] >= st.significance:
             words.append(f"{m.name} removes it (p = {after[2]:.2g} after)")
-    if not out:
-        return [], (f" The base residuals trend with the sample thickness (p = {base[2]:.2g}), "
-                    "which no RVE effect can make; no thickness-dependent candidate removes "
-                    "it.")
-    return out, (f" The base residuals trend with the sample thickness (p = {base[2]:.2g}), "
-                 "which no RVE effect can make: " + "; ".join(words) + ".")
+    return (f" The base residuals trend with the sample thickness (p = {trend[2]:.2g}), "
+            "which no RVE effect can make" + (": " + "; ".join(words) if words else
+                                              "; no thickness-dependent candidate removes it")
+            + ".")
 
 
 def find_discrepancy(measurements: Measurements, *,
@@ -93,7 +93,8 @@ def find_discrepancy(measurements: Measurements, *,
                      effects: Sequence[Effect] | None = None,
                      tables: ForwardTables | None = None,
                      tick: Callable[[], None] | None = None,
-                     correct: Callable[["Discrepancy"], None] | None = None) -> Discrepancy:
+                     correct: Callable[..., Corrected] | None = None,
+                     explain: bool = True) -> Discrepancy:
     """Run the workflow on a measurement table.
 
     Parameters
@@ -107,13 +108,21 @@ def find_discrepancy(measurements: Measurements, *,
         The candidate library (default :func:`itr_identify.discrepancy.effects.default_effects`).
     tables : ForwardTables, optional
         Forward tables of an earlier call (they do not depend on the measurements); built
-        when not given.
+        when not given. They are not changed.
     tick : callable, optional
         Called after every full solve.
     correct : callable, optional
-        ``correct(d)`` refits candidates with their table level corrected at their best
-        point (:func:`itr_identify.discrepancy.best_point.corrector`; it makes full
-        solves); None: every candidate keeps the base model's correction.
+        Refits the candidates over the naming threshold with their table level corrected
+        at their best point (:func:`itr_identify.discrepancy.best_point.corrector`; it makes
+        full solves); None: every candidate keeps the base model's correction.
+    explain : bool
+        Also find the tied set, the measurement that would decide it and the model-form
+        term (default); False: the verdict alone (calibration studies).
+
+    Returns
+    -------
+    Discrepancy
+        Frozen: the verdict and everything it was decided from.
     """
     settings = settings or DiscrepancySettings()
     comps = {f: fractions_of(f, settings.system) for f in measurements.formulations}
@@ -129,46 +138,58 @@ def find_discrepancy(measurements: Measurements, *,
         raise ValueError(f"tables: no forward table for {missing}")
     effects = list(tables.effects if effects is None else effects)
     # corrections at best points belong to one table's fits: none carried from an earlier call
-    tables.effect_corrections.clear()
+    tables = replace(tables, effect_corrections={})
     groups = groups_of(measurements, comps, system=settings.system)
     aux = auxiliary_groups(measurements, comps)
     base = fit_model(tables, groups, None, aux)
-    skipped, fits = {}, []
-    for e in effects:
-        fits.append(fit_model(tables, groups, e, aux))
-    fits.sort(key=lambda m: m.bic)
-    out = Discrepancy("none", "", groups, base, fits, skipped,
-                      float(stats.chi2.sf(base.chi_square, base.dof())),
-                      residual_structure(groups, base), left_out, effects, None, tables,
-                      aux=aux, densities=settings.system.densities(
-                          sorted({g.filler for g in groups})))
+    fits = [fit_model(tables, groups, e, aux) for e in effects]
+    threshold = calibrate_threshold(tables, groups, aux, base, effects,
+                                    false_naming_rate=settings.false_naming_rate,
+                                    replicates=settings.calibration_replicates,
+                                    seed=settings.calibration_seed)
+    corrected_at_best: dict[str, dict[str, float]] = {}
     if settings.correct_at_best and correct is not None:
-        correct(out)
-    _decide(out, settings)
-    out.tied = tied_set(out, settings)
+        c = correct(tables, groups, aux, base, fits, effects, threshold.log_bayes_factor)
+        tables, fits, corrected_at_best = c.tables, c.fits, c.factors
+    fits.sort(key=lambda m: base.log_evidence - m.log_evidence)
+    p_base = float(stats.chi2.sf(base.chi_square, base.dof()))
+    verdict = decide(base, fits, effects, groups, p_base, threshold, settings)
+    out = Discrepancy(verdict.verdict, verdict.statement, groups, base, fits, {}, p_base,
+                      residual_structure(groups, base), left_out, effects, verdict.winner,
+                      tables, aux=aux, densities=settings.system.densities(
+                          sorted({g.filler for g in groups})),
+                      corrected_at_best=corrected_at_best, threshold=threshold)
+    if not explain:
+        return out
+    out = replace(out, tied=tied_set(out, settings))
     if len(out.tied) >= 2:
-        out.deciding = rank_measurements(out, settings)
-        _say_tied(out, settings)
+        deciding = rank_measurements(out, settings)
+        keys, text = _say_tied(out, deciding)
+        out = replace(out, deciding=deciding, deciding_keys=keys,
+                      statement=out.statement + text)
     if out.verdict != "named":
-        _add_model_form(out)
+        model_form, loo, text = _model_form(out)
+        out = replace(out, model_form=model_form, leave_one_out=loo,
+                      statement=out.statement + text)
     return out
 
 
-def _add_model_form(d: Discrepancy) -> None:
-    """Calibrate the base model with the model-form term, measure the leave-one-formulation-
-    out predictions with and without it, and say so in the statement."""
-    d.model_form = mf = fit_model_form(d.tables, d.groups)
+def _model_form(d: Discrepancy) -> tuple[ModelFormFit, dict[str, LeaveOneOut] | None, str]:
+    """The base model calibrated with the model-form term, the leave-one-formulation-out
+    predictions with and without it, and the sentence that says so."""
+    mf = fit_model_form(d.tables, d.groups)
+    loo = None
     if len({g.formulation for g in d.groups}) >= 3:
-        d.leave_one_out = {"base": leave_one_out(d.tables, d.groups, with_term=False),
-                           "model-form": leave_one_out(d.tables, d.groups)}
+        loo = {"base": leave_one_out(d.tables, d.groups, with_term=False),
+               "model-form": leave_one_out(d.tables, d.groups)}
     s, s_lo, s_hi = mf.amplitude
     rs = "; ".join(f"{k} {v[0]:.2g} ({v[1]:.2g} - {v[2]:.2g})"
                    for k, v in mf.resistances.items())
     text = (f" With a model-form term (a Gaussian-process discrepancy in the filler fraction, "
             f"amplitude {100 * s:.2g} % of k, 90 % {100 * s_lo:.2g} - {100 * s_hi:.2g} %), "
             f"the resistances are {rs} m^2 K/W (median, 90 % interval)")
-    if d.leave_one_out:
-        b, m = d.leave_one_out["base"], d.leave_one_out["model-form"]
+    if loo:
+        b, m = loo["base"], loo["model-form"]
         n = len(m.labels)
         text += (f"; each formulation predicted from the others falls inside the 90 % "
                  f"predictive interval for {int(m.covered.sum())} of {n} groups with it, "
@@ -177,7 +198,7 @@ def _add_model_form(d: Discrepancy) -> None:
         text += (f"; but the amplitude sits at its prior's upper end "
                  f"({100 * AMPLITUDE_RANGE[1]:g} %): the model misses by more than a "
                  "model-form term is meant to carry, and these resistances are not to be used")
-    d.statement += text + "."
+    return mf, loo, text + "."
 
 
 def resistance_remarks(fit: ModelFit, st: DiscrepancySettings) -> list[str]:
@@ -216,92 +237,101 @@ def _physical(e: Effect, value: float) -> bool:
     return lo - 1e-12 <= value <= hi * (1 + 1e-9)
 
 
-def _decide(d: Discrepancy, st: DiscrepancySettings) -> None:
-    significant = d.p_value_base < st.significance
-    base_line = (f"Base model: chi-square {d.base.chi_square:.1f} on {d.base.dof()} degrees "
-                 f"of freedom (p = {d.p_value_base:.2g}): the residuals are "
+@dataclass(frozen=True)
+class Verdict:
+    """What :func:`decide` concludes: ``verdict`` (none, named, tie, unexplained), the
+    model it rests on and the paragraph that says why."""
+
+    verdict: str
+    winner: ModelFit | None
+    statement: str
+
+
+def decide(base: ModelFit, candidates: Sequence[ModelFit], effects: Sequence[Effect],
+           groups: Sequence[Group], p_value_base: float, threshold: NamingThreshold,
+           st: DiscrepancySettings) -> Verdict:
+    """The naming rule. A candidate is named when its log Bayes factor over the base model
+    exceeds the calibrated threshold (:mod:`.calibration`), it leaves no significant
+    residual, needs no resistance at the end of its grid, and (an input the lab stated with
+    an uncertainty) does not pull that input beyond three of its sds, which says the model
+    lacks something rather than that the input is off. Candidates within ``tie_margin / 2``
+    of the best in log Bayes factor are a tie. ``candidates`` best first."""
+    lbf = {m.name: float(m.log_evidence - base.log_evidence) for m in candidates}
+    cut = threshold.log_bayes_factor
+    significant = p_value_base < st.significance
+    base_line = (f"Base model: chi-square {base.chi_square:.1f} on {base.dof()} degrees "
+                 f"of freedom (p = {p_value_base:.2g}): the residuals are "
                  f"{'significant' if significant else 'consistent with the noise'}.")
-    remarks = resistance_remarks(d.base, st)
+    remarks = resistance_remarks(base, st)
     if remarks:
         base_line += " Its resistances: " + "; ".join(remarks) + "."
-    if d.base.at_grid_edge:
+    if base.at_grid_edge:
         # the base model reaches the data only from the end of its range: a discrepancy in
         # itself, whatever the chi-square says
         base_line += (" A base fit at the end of the resistance grid is a discrepancy in "
                       "itself: inside the grid the model cannot reach the measurements.")
         significant = True
-    supported = [m for m in d.candidates if d.base.bic - m.bic >= st.bic_margin]
-    by_trend, trend_line = _explains_thickness_trend(d, st)
-    base_line += trend_line
-    if by_trend:
-        significant = True
-        supported += [m for m in by_trend if m not in supported]
-        supported.sort(key=lambda m: m.bic)
+    base_line += _thickness_remark(groups, base, candidates, effects, st)
+    rule = (f"the naming threshold, a log Bayes factor of {cut:.2f} (at most "
+            f"{threshold.false_naming_rate:.0%} of {threshold.replicates} noise-only tables "
+            "drawn from the base model name an effect)")
+    supported = [m for m in candidates if lbf[m.name] > cut]
     edge = [m.name for m in supported if m.at_grid_edge]
     supported = [m for m in supported if not m.at_grid_edge]
     if edge:
-        base_line += (f" Lowering the BIC by {st.bic_margin:g} or more only with a resistance "
-                      f"at the edge of its range, hence not named: {', '.join(edge)}.")
-    implausible = [(m, e) for m in supported for e in d.effects
-                   if e.name == m.name and not _physical(e, m.parameters[e.parameter])]
-    if implausible:
-        supported = [m for m in supported if m not in [x for x, _ in implausible]]
-        base_line += " Lowering the BIC by {:g} or more only with a value outside its " \
-            "physical range, hence not named: {}.".format(st.bic_margin, "; ".join(
-                f"{m.name} ({e.parameter} = {m.parameters[e.parameter]:.3g}, 90 % "
-                f"{m.interval[0]:.3g} - {m.interval[1]:.3g}; physical "
-                f"{e.physical_range[0]:g} - {e.physical_range[1]:g}; what would decide: "
-                f"{e.separate_by})" for m, e in implausible))
+        base_line += (f" Over {rule} only with a resistance at the end of its grid, hence "
+                      f"not named: {', '.join(edge)}.")
     if not supported:
-        d.verdict = "unexplained" if significant else "none"
+        best = candidates[0] if candidates else None
+        near = (f" The closest candidate, {best.name}, has a log Bayes factor of "
+                f"{lbf[best.name]:.2f}." if best is not None else "")
         if significant:
-            best = d.candidates[0] if d.candidates else None
-            near = (f" The closest candidate, {best.name}, lowers the BIC by "
-                    f"{d.base.bic - best.bic:.1f} (< {st.bic_margin:g})."
-                    if best and d.base.bic - best.bic < st.bic_margin else "")
-            d.statement = (base_line + " No candidate of the library explains them: an "
-                           "unexplained discrepancy (a missing effect outside the library, or "
-                           "an error in the data)." + near)
-        else:
-            d.statement = base_line + (f" No candidate lowers the BIC by {st.bic_margin:g} "
-                                       "or more: no effect is named.")
-        return
+            return Verdict("unexplained", None, base_line + " No candidate of the library "
+                           f"reaches {rule}: an unexplained discrepancy (a missing effect "
+                           "outside the library, or an error in the data)." + near)
+        return Verdict("none", None, base_line + f" No candidate reaches {rule}: no effect "
+                       "is named." + near)
     top = supported[0]
-    ties = [m for m in supported[1:] if m.bic - top.bic < st.tie_margin]
-    p_after = d.p_value(top)
-    if p_after < st.significance:
-        d.verdict = "unexplained"
-        d.winner = top
-        d.statement = (base_line + f" The best candidate, {top.name}, lowers the BIC by "
-                       f"{d.base.bic - top.bic:.1f} but leaves a significant residual "
-                       f"(chi-square/dof {d.chi_square_per_dof(top):.2f}, p = {p_after:.2g}): "
-                       "the discrepancy is not explained by one library effect.")
-        return
-    effect = next(e for e in d.effects if e.name == top.name)
+    effect = next(e for e in effects if e.name == top.name)
     lo, hi = top.interval
-    named = (f"{top.name}: {effect.parameter} = {top.parameters[effect.parameter]:.3g} "
-             f"(90 % interval {lo:.3g} - {hi:.3g}), BIC lower by "
-             f"{d.base.bic - top.bic:.1f}, chi-square/dof {d.chi_square_per_dof(d.base):.2f} "
-             f"-> {d.chi_square_per_dof(top):.2f}")
-    d.winner = top
+    value = top.parameters[effect.parameter]
+    named = (f"{top.name}: {effect.parameter} = {value:.3g} (90 % interval {lo:.3g} - "
+             f"{hi:.3g}), log Bayes factor {lbf[top.name]:.1f} over {rule}, chi-square/dof "
+             f"{base.chi_square / base.dof():.2f} -> {top.chi_square / top.dof():.2f}")
+    if not _physical(effect, value):
+        named += (f"; outside its physical range {effect.physical_range[0]:g} - "
+                  f"{effect.physical_range[1]:g} (weighed down by its prior, not excluded)")
     moved = resistance_remarks(top, st)
     if moved:
         named += "; its resistances: " + "; ".join(moved)
+    p_after = float(stats.chi2.sf(top.chi_square, top.dof()))
+    if p_after < st.significance:
+        return Verdict("unexplained", top, base_line + f" The best candidate, {top.name}, "
+                       f"has a log Bayes factor of {lbf[top.name]:.1f} but leaves a "
+                       f"significant residual (chi-square/dof {top.chi_square / top.dof():.2f}"
+                       f", p = {p_after:.2g}): the discrepancy is not explained by one library "
+                       "effect.")
+    pulled = getattr(effect, "pulled_beyond_statement", None)
+    if pulled is not None and pulled((lo, hi)):
+        return Verdict("unexplained", top, base_line + f" The data pull {named}; but that "
+                       f"input is stated as {effect.nominal:g} with a relative sd of "
+                       f"{effect.stated_sd:.0%}, and its whole 90 % interval lies beyond three "
+                       "of those: the model lacks something (an effect outside the library) "
+                       "rather than the input being off.")
+    ties = [m for m in supported[1:] if lbf[top.name] - lbf[m.name] < st.tie_margin / 2]
     if ties:
-        d.verdict = "tie"
-        others = "; ".join(f"{m.name} (BIC {m.bic - top.bic:+.1f})" for m in ties)
-        seps = "; ".join(f"{e.name}: {e.separate_by}" for e in d.effects
+        others = "; ".join(f"{m.name} (log Bayes factor {lbf[m.name]:.1f})" for m in ties)
+        seps = "; ".join(f"{e.name}: {e.separate_by}" for e in effects
                          if e.name in [top.name] + [m.name for m in ties])
-        d.statement = (base_line + f" Best: {named}. Equally good within "
-                       f"{st.tie_margin:g} in BIC: {others}. The data do not separate them; "
-                       f"what would: {seps}.")
-    else:
-        d.verdict = "named"
-        d.statement = base_line + f" Named: {named}."
+        return Verdict("tie", top, base_line + f" Best: {named}. Equally good within "
+                       f"{st.tie_margin / 2:g} in log Bayes factor: {others}. The data do not "
+                       f"separate them; what would: {seps}.")
+    return Verdict("named", top, base_line + f" Named: {named}.")
 
 
-def _say_tied(d: Discrepancy, st: DiscrepancySettings) -> None:
-    """Add the tied set and the measurement that would decide it to the statement."""
+def _say_tied(d: Discrepancy, deciding: Sequence) -> tuple[list[str], str]:
+    """The measurements named to decide the tied set and the sentence on the tied set and
+    on them."""
     names = ", ".join(_model_words(m, d) for m in d.tied)
     text = f" The data do not tell apart: {names}."
     scale = [e for e in d.effects if e.scales_resistance]
@@ -309,11 +339,12 @@ def _say_tied(d: Discrepancy, st: DiscrepancySettings) -> None:
         text += (" Not in that set, as no measurement of k, density or mass fraction can "
                  "tell it from the resistances: " + "; ".join(
                      f"{e.name} (what would: {e.separate_by})" for e in scale) + ".")
-    if d.deciding:
-        chosen = deciding_set(d.deciding)
-        d.deciding_keys = [x.key for x in chosen]
-        n = len(d.deciding[0].separation)
-        left = unseparated(d.deciding)
+    keys: list[str] = []
+    if deciding:
+        chosen = deciding_set(deciding)
+        keys = [x.key for x in chosen]
+        n = len(deciding[0].separation)
+        left = unseparated(deciding)
         if len(chosen) > 1:
             text += (" No single measurement separates every pair it could; together these "
                      f"{len(chosen)} are expected to: "
@@ -325,7 +356,7 @@ def _say_tied(d: Discrepancy, st: DiscrepancySettings) -> None:
                      + "; ".join(f"{_short(a)} / {_short(b)}" for a, b in left)
                      + " (k at other fractions or another kind of evidence would).")
         text += "".join(" " + x.sentence(alone=len(chosen) == 1) for x in chosen)
-    d.statement += text
+    return keys, text
 
 
 def _model_words(m: ModelFit, d: Discrepancy) -> str:

@@ -70,6 +70,24 @@ class Effect:
             raise ValueError(f"nominal: {self.nominal!r} lies outside the grid of "
                              f"{self.name!r} ({v[0]!r}..{v[-1]!r})")
 
+    def prior_weights(self, axis: np.ndarray) -> np.ndarray:
+        """The effect's prior on the points of ``axis`` (a grid of its parameter, evenly
+        spaced in the scale it is calibrated in: :attr:`log_scale`), normalised to sum to 1.
+
+        Uniform in that scale over :attr:`physical_range` (the whole grid where none is
+        stated), with half-normal tails outside it whose width is a quarter of the range:
+        a value just outside the range is less likely, not impossible (the naming rule
+        weighs it by this prior, :func:`itr_identify.discrepancy.fit.fit_model`)."""
+        axis = np.asarray(axis, dtype=float)
+        lo, hi = self.physical_range or (self.values[0], self.values[-1])
+        scale = np.log if self.log_scale and lo > 0 else (lambda x: x)
+        x = scale(np.maximum(axis, 1e-300)) if scale is np.log else axis
+        a, b = scale(lo), scale(hi)
+        width = 0.25 * (b - a) if b > a else 1.0
+        outside = np.where(x < a, a - x, np.where(x > b, x - b, 0.0))
+        w = np.exp(-0.5 * (outside / width) ** 2)
+        return w / w.sum()
+
     @property
     def needs_thickness(self) -> bool:
         """Whether the effect can only be seen in measurements at several thicknesses."""

@@ -57,11 +57,37 @@ class MatrixConductivity(Effect):
     separate_by: str = ("the conductivity of the neat matrix (silicone + coupling agent) "
                         "and the sample density (voids lower k the same way)")
 
+    stated_sd: float = 0.0
+
     @classmethod
     def for_system(cls, system: MaterialSystem) -> "MatrixConductivity":
-        """The effect about ``system``'s matrix conductivity."""
+        """The effect about ``system``'s matrix conductivity, with the relative sd the
+        system states for it (the lab's measurement or the handbook's)."""
         k = system.matrix_conductivity
-        return cls(nominal=k, values=_matrix_values(k))
+        return cls(nominal=k, values=_matrix_values(k),
+                   stated_sd=float(system.matrix_conductivity_sd))
+
+    def prior_weights(self, axis: np.ndarray) -> np.ndarray:
+        """Lognormal about the nominal value with the stated relative sd (``stated_sd``;
+        the grid's uniform prior where it is 0): a matrix conductivity the lab measured
+        is not free to move far from its measurement."""
+        if self.stated_sd <= 0:
+            return super().prior_weights(axis)
+        axis = np.asarray(axis, dtype=float)
+        z = np.log(axis / self.nominal) / self.stated_sd
+        # density in ln k on an axis evenly spaced in k (log_scale False) or in ln k
+        w = np.exp(-0.5 * z ** 2) / (1.0 if self.log_scale else axis)
+        return w / w.sum()
+
+    def pulled_beyond_statement(self, interval: tuple[float, float]) -> bool:
+        """Whether the 90 % interval of the fitted value lies wholly beyond three stated
+        sds of the nominal value: the data pull a measured input far outside its
+        uncertainty (then the model lacks something; the input is not to be blamed)."""
+        if self.stated_sd <= 0:
+            return False
+        lo, hi = (np.log(np.asarray(interval, dtype=float) / self.nominal)
+                  / self.stated_sd)
+        return bool(lo > 3.0 or hi < -3.0)
 
     def materials(self, base: Materials, value: float) -> Materials:
         return base.with_values(conductivity={base.matrix: float(value)})

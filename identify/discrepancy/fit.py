@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.interpolate import RegularGridInterpolator
+from scipy.special import logsumexp
 
 from itr_fv.materials.material_system import MaterialSystem
 
@@ -123,6 +124,11 @@ class ModelFit:
         Model value and likelihood variance per auxiliary group (empty without them).
     n_observations : int
         k groups plus auxiliary groups.
+    log_evidence : float
+        ``ln`` of the likelihood integrated over the model's priors: each resistance
+        log-uniform over the solved grid, the effect's parameter by
+        :meth:`Effect.prior_weights`. Its difference to the base model's is the log Bayes
+        factor that names an effect (:mod:`.calibration`).
     """
 
     name: str
@@ -138,6 +144,7 @@ class ModelFit:
     aux_predicted: np.ndarray = field(default_factory=lambda: np.zeros(0))
     aux_variance: np.ndarray = field(default_factory=lambda: np.zeros(0))
     n_observations: int = 0
+    log_evidence: float = float("nan")
 
     def dof(self, n_groups: int | None = None) -> int:
         """Degrees of freedom: observations (default :attr:`n_observations`) less
@@ -224,6 +231,11 @@ def _gaussian_low_rank(residuals: Sequence[np.ndarray], variances: Sequence[np.n
     if not cols:
         return -0.5 * (srr + logd), srr
     q = len(cols)
+    if q == 1:                                  # one shared error: A and b are scalars
+        b1 = sum(c * x / v for c, x, v in zip(cols[0], rr, d))
+        a1 = 1.0 + sum(c * c / v for c, v in zip(cols[0], d))
+        quad = srr - b1 * b1 / a1
+        return -0.5 * (quad + logd + np.log(a1)), quad
     A = np.zeros(shape + (q, q))
     b = np.zeros(shape + (q,))
     for i, ci in enumerate(cols):
@@ -307,7 +319,7 @@ def _fraction_slopes(where: dict[str, tuple[str, float]], k: dict[str, np.ndarra
 def fit_model(tables: ForwardTables, groups: Sequence[Group], effect: Effect | None,
               aux: Sequence[AuxGroup] = (), *, at: float | None = None,
               physical: bool = False, present: int = 0,
-              interval_drop: float | None = None) -> ModelFit:
+              interval_drop: float | None = None, meshes: dict | None = None) -> ModelFit:
     """Calibrate the base model (``effect=None``) or base + ``effect`` on the k groups and
     the auxiliary groups ``aux`` (density, mass fraction: predicted from the composition the
     effect gives, :mod:`.observables`).
@@ -324,7 +336,9 @@ def fit_model(tables: ForwardTables, groups: Sequence[Group], effect: Effect | N
     range (the best plausible explanation; the interval is then inside those ranges);
     ``present`` (-1 or +1) holds the effect at least one grid step below or above nominal
     (the effect there, not its absence); ``interval_drop`` replaces the 90 % interval's
-    log-likelihood drop.
+    log-likelihood drop. ``meshes``, a dict the caller owns, keeps the model's k on the fine
+    mesh between calls on the same tables (it does not depend on the measurements: a
+    calibration fitting many noise-only tables interpolates once).
     """
     st = tables.settings
     system = st.system
@@ -336,6 +350,9 @@ def fit_model(tables: ForwardTables, groups: Sequence[Group], effect: Effect | N
     kmesh = {}
     theta_axis = np.asarray(effect.values if effect else [0.0], dtype=float)
 
+    kmesh = kmesh if meshes is None else meshes.setdefault(
+        (id(tables), effect.name if effect is not None else None), {})
+
     def mesh(f: str, scale: float) -> np.ndarray:
         if (f, scale) not in kmesh:
             vals = (tables.base[f] if effect is None or not effect.solved
@@ -345,8 +362,12 @@ def fit_model(tables: ForwardTables, groups: Sequence[Group], effect: Effect | N
             if effect is not None and scale != 1.0:
                 ft = np.clip(effect.size_equivalent(fine_t, scale), theta_axis[0],
                              theta_axis[-1])
-            level = tables.level(f, effect.name if effect else None)
-            kmesh[(f, scale)] = level * _interp(logr, theta_axis, vals, effect, fr, ft)
+            # the level per resistance, at the resistance the table is read at (R / scale
+            # for another powder: the correction belongs to the RVE the table solved)
+            level = np.broadcast_to(np.asarray(
+                tables.level(f, effect.name if effect else None, 10 ** fr), float), fr.shape)
+            kmesh[(f, scale)] = level[:, None] * _interp(logr, theta_axis, vals, effect,
+                                                         fr, ft)
         return kmesh[(f, scale)]
 
     def model_k(g: Group, i=slice(None), j=slice(None)) -> np.ndarray:
@@ -403,6 +424,8 @@ def fit_model(tables: ForwardTables, groups: Sequence[Group], effect: Effect | N
     ll = {fl: np.zeros((fine_r.size, fine_t.size)) for fl in fillers}
     for f, members in forms.items():
         ll[members[0].filler] = ll[members[0].filler] + _gaussian_low_rank(*terms(f))[0]
+    log_evidence = _log_evidence(ll, effect.prior_weights(fine_t) if effect is not None
+                                 else np.ones(1))
     if physical:
         lo, hi = np.log10(st.physical_r_m2K_per_W)
         out_r = (fine_r < lo - 1e-9) | (fine_r > hi + 1e-9)
@@ -452,7 +475,16 @@ def fit_model(tables: ForwardTables, groups: Sequence[Group], effect: Effect | N
     n_obs = len(groups) + len(aux)
     return ModelFit("base" if effect is None else effect.name, params, interval, pred, var,
                     lmax, chi2, -2 * lmax + p * math.log(n_obs), p, edge, aux_pred, aux_var,
-                    n_obs)
+                    n_obs, log_evidence)
+
+
+def _log_evidence(ll: dict[str, np.ndarray], weights: np.ndarray) -> float:
+    """``ln`` of the likelihood ``exp(sum over fillers of ll[filler])`` integrated over each
+    filler's resistance (log-uniform over the fine grid: rows of ``ll[filler]``) and the
+    effect's parameter (``weights`` over the columns, summing to 1)."""
+    per_theta = sum(logsumexp(v, axis=0) - math.log(v.shape[0]) for v in ll.values())
+    keep = weights > 0
+    return float(logsumexp(per_theta[keep], b=weights[keep]))
 
 
 def evaluate(tables: ForwardTables, effect: Effect | None, parameters: dict[str, float],
@@ -474,7 +506,8 @@ def evaluate(tables: ForwardTables, effect: Effect | None, parameters: dict[str,
                      logr[-1])
         ft = theta if effect is None or g.scale == 1.0 else float(np.clip(
             effect.size_equivalent(theta, g.scale), axis[0], axis[-1]))
-        level = tables.level(g.formulation, effect.name if effect else None)
+        level = float(np.ravel(tables.level(g.formulation, effect.name if effect else None,
+                                            np.array([10 ** fr])))[0])
         k[n] = level * _interp(logr, axis, vals, effect, np.array([fr]), np.array([ft]))[0, 0]
         if effect is not None and (g.thickness_m is not None or effect.needs_thickness):
             t = g.thickness_m if g.thickness_m is not None else st.assumed_thickness_mm * 1e-3

@@ -84,7 +84,8 @@ def _data(tables: ForwardTables, groups: Sequence[Group]) -> _Data:
     curves = {}
     for g in groups:
         if g.formulation not in curves:
-            curves[g.formulation] = np.log(tables.level(g.formulation) * _interp(
+            level = np.asarray(tables.level(g.formulation, None, 10 ** fine))
+            curves[g.formulation] = np.log(level * _interp(
                 logr, np.zeros(1), tables.base[g.formulation], None, fine, np.zeros(1))[:, 0])
     return _Data(fillers, np.array([fillers.index(g.filler) for g in groups]),
                  np.array([g.fraction * 100 for g in groups]),

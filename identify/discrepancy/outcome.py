@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 
 from scipy import stats
 
+from .calibration import NamingThreshold
 from .effect import Effect
 from .fit import Group, ModelFit
 from .model_form import LeaveOneOut, ModelFormFit
@@ -96,9 +97,10 @@ class DecidingMeasurement:
                 "outcomes": {m: [[lab, v] for lab, v in o] for m, o in self.outcomes.items()}}
 
 
-@dataclass
+@dataclass(frozen=True)
 class Discrepancy:
-    """Outcome of the workflow.
+    """Outcome of the workflow (frozen: every stage of
+    :func:`~.decision.find_discrepancy` makes a new one).
 
     Attributes
     ----------
@@ -108,7 +110,7 @@ class Discrepancy:
     groups : list of Group
     base : ModelFit
     candidates : list of ModelFit
-        Ranked by BIC, best first.
+        Ranked by log Bayes factor over the base model, best first.
     skipped : dict of str to str
         Candidates not tried, with the reason.
     p_value_base : float
@@ -139,6 +141,9 @@ class Discrepancy:
     deciding_keys : list of str
         The measurement named to decide the tied set: the best one, or the two that
         together separate every pair where no single one does.
+    threshold : NamingThreshold or None
+        The naming rule's threshold on the log Bayes factor, calibrated on this table
+        (:mod:`.calibration`).
     """
 
     verdict: str
@@ -161,6 +166,11 @@ class Discrepancy:
     deciding: list[DecidingMeasurement] = field(default_factory=list)
     corrected_at_best: dict[str, dict[str, float]] = field(default_factory=dict)
     deciding_keys: list[str] = field(default_factory=list)
+    threshold: NamingThreshold | None = None
+
+    def log_bayes_factor(self, fit: ModelFit) -> float:
+        """``ln`` of the Bayes factor of ``fit`` over the base model."""
+        return float(fit.log_evidence - self.base.log_evidence)
 
     def p_value(self, fit: ModelFit) -> float:
         return float(stats.chi2.sf(fit.chi_square, fit.dof()))
@@ -175,6 +185,8 @@ class Discrepancy:
                     "chi_square": m.chi_square, "dof": m.dof(),
                     "p_value": self.p_value(m), "bic": m.bic,
                     "delta_bic": self.base.bic - m.bic,
+                    "log_evidence": m.log_evidence,
+                    "log_bayes_factor": self.log_bayes_factor(m),
                     "predicted": m.predicted.tolist(), "at_grid_edge": m.at_grid_edge,
                     "auxiliary_predicted": m.aux_predicted.tolist(),
                     "n_observations": m.n_observations}
@@ -191,6 +203,7 @@ class Discrepancy:
                 "deciding": [x.to_dict() for x in self.deciding],
                 "deciding_keys": self.deciding_keys,
                 "corrected_at_best": self.corrected_at_best,
+                "threshold": self.threshold.to_dict() if self.threshold else None,
                 "base": fit_dict(self.base), "candidates": [fit_dict(c) for c in self.candidates],
                 "skipped": self.skipped, "structure": self.structure,
                 "left_out": self.left_out,

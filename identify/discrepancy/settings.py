@@ -25,11 +25,13 @@ class DiscrepancySettings:
         RVE box, voxel, replicas, packing seed, solver tolerance of the tables (default
         12 um at 0.25 um, as ``itr reproduce``).
     faithful : FaithfulRVE or None
-        Where each formulation's table level is corrected by full solves (default the
-        ``standard`` fidelity level: two 24 um packings at 0.2 and 0.25 um, voxel bias
-        extrapolated away; :mod:`itr_identify.forward.fidelity`), at
-        :attr:`r_scatter_m2K_per_W`; None: the tables' own level (12 um at 0.25 um reads
-        Al2O3-60 about 3 % and AlN-60 10-12 % low).
+        Where each formulation's table level is corrected (default the ``shipped``
+        fidelity level, the headline's: the shipped converged-box corrections, read per
+        resistance, where they hold (:mod:`itr_identify.forward.shipped`), else full solves
+        of two 24 um packings at 0.2 and 0.25 um with the voxel bias extrapolated away at
+        :attr:`r_scatter_m2K_per_W`, as ``standard``;
+        :mod:`itr_identify.forward.fidelity`); None: the tables' own level (12 um at
+        0.25 um reads Al2O3-60 about 3 % and AlN-60 10-12 % low).
     r_grid_m2K_per_W : tuple of float
         Resistances solved per formulation, m^2 K/W (log spaced; also the prior range).
     r_scatter_m2K_per_W : float
@@ -37,9 +39,19 @@ class DiscrepancySettings:
     fine_points : int
         Points of the calibration grid per axis.
     bic_margin : float
-        BIC decrease over the base model that names an effect.
+        BIC separation that the measurement proposed to decide a tie is expected to give
+        (:mod:`.deciding`); the verdict itself is the Bayes factor's.
     tie_margin : float
-        BIC difference under which two candidates explain the data equally well.
+        BIC difference under which two candidates explain the data equally well (half of
+        it in log Bayes factor for the verdict's tie).
+    false_naming_rate : float
+        The share of noise-only tables (drawn from the calibrated base model) on which the
+        naming rule may name an effect: sets the threshold on the log Bayes factor
+        (:mod:`.calibration`).
+    calibration_replicates : int
+        Noise-only tables drawn to set that threshold (each fits every candidate once).
+    calibration_seed : int
+        Seed of those draws.
     significance : float
         p-value of the chi-square test under which a residual is significant.
     physical_r_m2K_per_W : (float, float)
@@ -56,7 +68,8 @@ class DiscrepancySettings:
     fraction_sd : float
         Standard deviation of a formulation's actual filler volume fraction about its
         stated one (weighing, losses in mixing), an error shared by its k, density and mass
-        fraction (a batch candidate adds its own to it).
+        fraction (a batch candidate adds its own to it). Default 0: a fraction error is the
+        batch candidate's to find, not a variance the base model carries.
     assumed_thickness_mm : float
         Sample thickness at which the tester's contact resistance is fitted on a table
         without thicknesses (then only ``R_c / t`` is identified), mm.
@@ -74,16 +87,19 @@ class DiscrepancySettings:
 
     forward: ForwardSettings = field(default_factory=lambda: ForwardSettings(
         RVESpec(box_um=12.0, voxel_um=0.25), replicas=3))
-    faithful: FaithfulRVE | None = field(default_factory=lambda: faithful_for("standard"))
+    faithful: FaithfulRVE | None = field(default_factory=lambda: faithful_for("shipped"))
     r_grid_m2K_per_W: tuple[float, ...] = tuple(float(x) for x in np.logspace(-9, -6, 7))
     r_scatter_m2K_per_W: float = 3e-8
     fine_points: int = 121
     bic_margin: float = 6.0
     tie_margin: float = 2.0
+    false_naming_rate: float = 0.05
+    calibration_replicates: int = 40
+    calibration_seed: int = 0
     significance: float = 0.01
     physical_r_m2K_per_W: tuple[float, float] = (1e-9, 1e-7)
     auxiliary_model_sd: float = 0.001
-    fraction_sd: float = 0.002
+    fraction_sd: float = 0.0
     assumed_thickness_mm: float = 1.0
     auxiliary_noise: dict = field(default_factory=lambda: {
         "density_g_per_cm3": 0.003, "filler_mass_fraction": 0.003, "samples": 4,
@@ -122,6 +138,12 @@ class DiscrepancySettings:
         if not 0.01 <= self.assumed_thickness_mm <= 20:
             raise ValueError(f"assumed_thickness_mm: expected 0.01 - 20 mm, got "
                              f"{self.assumed_thickness_mm!r}")
+        if not 0 < self.false_naming_rate <= 0.5:
+            raise ValueError(f"false_naming_rate: expected a share in (0, 0.5], got "
+                             f"{self.false_naming_rate!r}")
+        if not isinstance(self.calibration_replicates, int) or self.calibration_replicates < 10:
+            raise ValueError(f"calibration_replicates: expected a whole number >= 10, got "
+                             f"{self.calibration_replicates!r}")
         if not 0 < self.significance < 1:
             raise ValueError(f"significance: expected a p-value in (0, 1), got "
                              f"{self.significance!r}")

@@ -6,11 +6,10 @@ voxels, the voxel bias removed by Richardson extrapolation) at the scatter's res
 
 from __future__ import annotations
 
-import math
 import time
 import warnings
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -18,11 +17,13 @@ from itr_fv.materials.parameters import parameter_name
 from itr_surrogate.engine import RVEData, SolveEngine, SolveRequest
 
 from ..forward.fidelity import Correction
-from ..forward.model import PARAMETRISATIONS, ForwardModel
+from ..forward.model import PARAMETRISATIONS, ForwardModel, shipped_factor
+from ..forward.shipped import ShippedFactor
 from .effects import Effect, default_effects
 from .settings import DiscrepancySettings
 
-__all__ = ["ForwardTables", "build_tables", "n_solves", "resistance_name"]
+__all__ = ["ForwardTables", "build_tables", "n_solves", "resistance_name",
+           "shipped_corrections"]
 
 
 @dataclass
@@ -42,30 +43,66 @@ class ForwardTables:
     seconds: float = 0.0
     corrections: dict[str, Correction] = field(default_factory=dict)
     effect_corrections: dict[tuple[str, str], Correction] = field(default_factory=dict)
+    shipped: dict[str, ShippedFactor] = field(default_factory=dict)
 
-    def level(self, formulation: str, effect: str | None = None) -> float:
+    def level(self, formulation: str, effect: str | None = None,
+              r_m2K_per_W: np.ndarray | float | None = None) -> np.ndarray | float:
         """Factor from the first replica's table to the model's k: the replica factor
         times the faithful correction's factor (1 without one); for a candidate
-        ``effect`` corrected at its best point (:mod:`.best_point`), that correction's."""
+        ``effect`` corrected at its best point (:mod:`.best_point`), that correction's.
+        A formulation with a shipped correction (the headline's level,
+        :mod:`itr_identify.forward.shipped`) takes its factor at each filler-matrix
+        resistance of ``r_m2K_per_W`` (m^2 K/W; default
+        :attr:`DiscrepancySettings.r_scatter_m2K_per_W`), an array where that is one."""
         c = self.effect_corrections.get((effect, formulation)) if effect else None
+        if c is None and formulation in self.shipped:
+            r = np.atleast_1d(np.asarray(self.settings.r_scatter_m2K_per_W
+                                         if r_m2K_per_W is None else r_m2K_per_W, float))
+            sf = self.shipped[formulation]
+            factor = sf.factor({p: r for p in sf.fit["parameters"]}, r.size)[0]
+            out = self.replica_factor[formulation] * factor
+            return out if np.ndim(r_m2K_per_W) else float(out[0])
         c = c if c is not None else self.corrections.get(formulation)
         return self.replica_factor[formulation] * (c.factor if c is not None else 1.0)
 
     def relative_sd(self, formulation: str) -> float:
-        """Relative standard uncertainty of the model's k of ``formulation``: the RVE
-        scatter and the faithful correction's uncertainty in quadrature."""
+        """Relative standard uncertainty of the model's k of ``formulation``: with a
+        faithful correction, the correction's (the level is then the faithful packings'
+        mean, and the cheap RVE's scatter cancels from it: ``replica_factor`` times the
+        factor is ``k_faithful / k_first_replica``); a shipped one's at
+        :attr:`DiscrepancySettings.r_scatter_m2K_per_W`; without one, one cheap RVE's
+        scatter."""
+        if formulation in self.shipped:
+            sf = self.shipped[formulation]
+            r = np.array([self.settings.r_scatter_m2K_per_W])
+            return float(sf.factor({p: r for p in sf.fit["parameters"]}, 1)[1][0])
         c = self.corrections.get(formulation)
-        return math.hypot(self.rve_scatter[formulation],
-                          c.relative_sd if c is not None else 0.0)
+        return c.relative_sd if c is not None else self.rve_scatter[formulation]
 
 
 def n_solves(n_formulations: int, settings: DiscrepancySettings,
-             effects: Sequence[Effect]) -> int:
-    """Full solves :func:`build_tables` makes for ``n_formulations`` single-filler ones."""
+             effects: Sequence[Effect], *, shipped: int = 0) -> int:
+    """Full solves :func:`build_tables` makes for ``n_formulations`` single-filler ones,
+    ``shipped`` of which take a shipped correction (no faithful solves)."""
     cols = 1 + sum(1 for e in effects for v in e.values if e.solved and v != e.nominal)
     faithful = 0 if settings.faithful is None else 2 * settings.faithful.packings
-    return n_formulations * (len(settings.r_grid_m2K_per_W) * cols + settings.forward.replicas
-                             + faithful)
+    return (n_formulations * (len(settings.r_grid_m2K_per_W) * cols
+                              + settings.forward.replicas)
+            + (n_formulations - shipped) * faithful)
+
+
+def shipped_corrections(fractions: dict[str, dict[str, float]],
+                        settings: DiscrepancySettings) -> dict[str, ShippedFactor]:
+    """The shipped correction of each single-filler formulation of ``fractions`` where the
+    settings ask for them (``faithful`` the ``shipped`` level) and they hold."""
+    out = {}
+    for f, comp in fractions.items():
+        if len(comp) == 1:
+            sf, _ = shipped_factor(replace(settings.forward, faithful=settings.faithful),
+                                   PARAMETRISATIONS["gap"], comp)
+            if sf is not None:
+                out[f] = sf
+    return out
 
 
 def resistance_name(filler: str, matrix: str) -> str:
@@ -101,6 +138,7 @@ def build_tables(fractions: dict[str, dict[str, float]], *,
     grid = list(settings.r_grid_m2K_per_W)
     base, table, factor, scatter = {}, {e.name: {} for e in effects}, {}, {}
     corrections: dict[str, Correction] = {}
+    shipped = shipped_corrections(fractions, settings)
     n = 0
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -115,7 +153,9 @@ def build_tables(fractions: dict[str, dict[str, float]], *,
                                                    tick, purpose="RVE scatter")
             n += len(model.microstructures)
             factor[f], scatter[f] = model.replica_factor, model.rve_scatter
-            if settings.faithful is not None:
+            if f in shipped:
+                pass                            # the headline's level, per resistance
+            elif settings.faithful is not None:
                 # the level of the replica mean at the scatter's resistance, corrected to
                 # the faithful packings' voxel-bias-free mean (one factor for the whole
                 # table of the formulation)
@@ -151,4 +191,4 @@ def build_tables(fractions: dict[str, dict[str, float]], *,
                         else solved[(e.name, theta)] for theta in e.values]
                 table[e.name][f] = np.stack(cols, axis=1)          # (nR, ntheta)
     return ForwardTables(settings, effects, base, table, factor, scatter, n,
-                         time.perf_counter() - t0, corrections)
+                         time.perf_counter() - t0, corrections, shipped=shipped)

@@ -26,7 +26,8 @@ def _fit_row(d: Discrepancy, m: ModelFit) -> str:
     rs = ", ".join(f"{k} {v:.2e}" for k, v in m.parameters.items() if k.startswith("R_"))
     edge = " (R at the grid edge)" if m.at_grid_edge else ""
     return (f"| {m.name} | {par} | {rs}{edge} | {m.chi_square:.1f} / {m.dof(len(d.groups))} "
-            f"| {d.p_value(m):.2g} | {m.bic:.1f} | {d.base.bic - m.bic:+.1f} |")
+            f"| {d.p_value(m):.2g} | {d.log_bayes_factor(m):+.2f} | {m.bic:.1f} | "
+            f"{d.base.bic - m.bic:+.1f} |")
 
 
 def report_lines(d: Discrepancy, settings: DiscrepancySettings) -> list[str]:
@@ -49,19 +50,27 @@ def report_lines(d: Discrepancy, settings: DiscrepancySettings) -> list[str]:
     lines += _auxiliary_lines(d, after)
     lines += ["", "## Structure of the base residuals", ""]
     lines += [f"- {s}" for s in d.structure]
-    lines += ["", "## Candidates (ranked by BIC)", "",
+    lines += ["", "## Candidates (ranked by log Bayes factor over the base model)", "",
               "| model | effect parameter (90 % interval) | resistances (m^2 K/W) | "
-              "chi-square / dof | p | BIC | BIC gain |", "|---|---|---|---|---|---|---|",
-              _fit_row(d, d.base)]
+              "chi-square / dof | p | ln Bayes factor | BIC | BIC gain |",
+              "|---|---|---|---|---|---|---|---|", _fit_row(d, d.base)]
     lines += [_fit_row(d, m) for m in d.candidates]
     for name, why in d.skipped.items():
-        lines.append(f"| {name} | not tried: {why} | | | | | |")
+        lines.append(f"| {name} | not tried: {why} | | | | | | |")
     lines += _model_form_lines(d)
     lines += _deciding_lines(d)
-    lines += ["", f"A candidate is named when it lowers the BIC by {settings.bic_margin:g} or "
-              f"more, leaves no significant residual (p >= {settings.significance:g}) and "
-              "needs no resistance at the edge of its range; candidates within "
-              f"{settings.tie_margin:g} of the best are reported as a tie.",
+    th = d.threshold
+    lines += ["", "A candidate is named when its log Bayes factor over the base model (the "
+              "likelihood integrated over the resistances and the effect's prior) exceeds the "
+              f"threshold calibrated on this table, {th.log_bayes_factor:.2f} (the "
+              f"{1 - th.false_naming_rate:.0%} quantile of the largest log Bayes factor on "
+              f"{th.replicates} noise-only tables drawn from the base model, seed {th.seed}), "
+              f"leaves no significant residual (p >= {settings.significance:g}), needs no "
+              "resistance at the edge of its grid and, for an input the material system "
+              "states with an uncertainty, keeps its 90 % interval within three of its sds; "
+              f"candidates within {settings.tie_margin / 2:g} of the best in log Bayes factor "
+              "are reported as a tie." if th is not None else
+              "No naming threshold was calibrated.",
               "", "## The library", "", "| effect | kind | parameter (grid) | signature | "
               "separated by |", "|---|---|---|---|---|"]
     for e in d.effects:
@@ -95,10 +104,21 @@ def _faithful_line(settings: DiscrepancySettings, t) -> str:
     factors = ", ".join(f"{f} {c.factor:.3f} +- {100 * c.relative_sd:.1f} %"
                         for f, c in (t.corrections.items() if t else []))
     boxes = ", ".join(f"{k} {v:g} um" for k, v in fr.boxes_um)
-    return (f"- faithful correction ({fr.name}): {fr.packings} packings per formulation "
-            f"({boxes}) at {fr.voxel_um:g} and {fr.coarse_voxel_um:g} um, voxel bias "
-            f"extrapolated away, at R = {settings.r_scatter_m2K_per_W:.1e} m^2 K/W; factor "
-            f"on the table per formulation: {factors}")
+    line = ""
+    if t is not None and t.shipped:
+        r = settings.r_scatter_m2K_per_W
+        line = ("- shipped correction (the headline's level: converged boxes, the voxel bias "
+                "extrapolated away; read per resistance): "
+                + ", ".join(f"{f} {t.level(f) / t.replica_factor[f]:.3f} "
+                            f"+- {100 * t.relative_sd(f):.1f} %" for f in t.shipped)
+                + f" at R = {r:.1e} m^2 K/W")
+        if not t.corrections:
+            return line
+        line += "\n"
+    return line + (f"- faithful correction ({fr.name}): {fr.packings} packings per formulation "
+                   f"({boxes}) at {fr.voxel_um:g} and {fr.coarse_voxel_um:g} um, voxel bias "
+                   f"extrapolated away, at R = {settings.r_scatter_m2K_per_W:.1e} m^2 K/W; "
+                   f"factor on the table per formulation: {factors}")
 
 
 def _model_form_lines(d: Discrepancy) -> list[str]:

@@ -15,7 +15,7 @@ from ..discrepancy.decision import Discrepancy, find_discrepancy
 from ..discrepancy.effects import default_effects
 from ..discrepancy.observables import auxiliary_groups
 from ..discrepancy.settings import DiscrepancySettings
-from ..discrepancy.tables import build_tables, n_solves
+from ..discrepancy.tables import build_tables, n_solves, shipped_corrections
 from ..inference.formulations import fractions_of
 from ..inference.measurements import Measurements
 from ..reporting.discrepancy_report import gap_figure, report_lines
@@ -45,7 +45,9 @@ def run_discrepancy(meas: Measurements, settings: DiscrepancySettings, out: Path
     effects = default_effects(settings.system) if effects is None else list(effects)
     with open_engine(out, workers=workers, scheduler=scheduler, store=store,
                      echo=echo) as engine, \
-            tqdm(total=n_solves(len(singles), settings, effects), desc="forward solves",
+            tqdm(total=n_solves(len(singles), settings, effects,
+                                shipped=len(shipped_corrections(singles, settings))),
+                 desc="forward solves",
                  unit="solve", disable=not progress) as bar:
         tables = build_tables(singles, settings=settings, effects=effects,
                               tick=lambda: bar.update(), engine=engine)
