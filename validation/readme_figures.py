@@ -284,16 +284,23 @@ def discrepancy_block() -> str:
             f"{s['null_chi_square_over_dof']:.2f}, and {s['effects_named_at_study_size']} of "
             f"7 library effects were named with the truth inside the 90 % interval at their "
             f"study size in at least half of 10 noise seeds (target 6). Share of seeds "
-            f"named, by size: {powers} (`validation/results/discrepancy_calibration.md`).")
+            f"naming it with the truth inside, by size: {powers} "
+            "(`validation/results/discrepancy_calibration.md`).")
     t3 = _json("discrepancy.json")
     if t3 and t3.get("threshold"):
         base = t3["base"]["parameters"]
         rs = ", ".join(f"{k} {v:.2g}" for k, v in base.items() if k.startswith("R_"))
+        head = (_json("reproduce_identified.json") or {}).get("headline", {}).get(
+            "parameters", {}).get("gap", {})
+        nominal = ", ".join(f"{k} {v['best_nominal_inputs']:.2g}" for k, v in head.items()
+                            if "best_nominal_inputs" in v)
         parts.append(
-            f"On Table 3 at the default (shipped) level: **{t3['verdict']}**, base "
-            f"chi-square {t3['base']['chi_square']:.1f} on {t3['base']['dof']} dof, base "
-            f"resistances {rs} m^2 K/W, naming threshold "
-            f"{t3['threshold']['log_bayes_factor']:.2f} "
+            f"On Table 3 at the default (shipped) level: **{t3['verdict']}**"
+            + (f" ({t3['winner_name']})" if t3.get("winner_name") else "")
+            + f", base chi-square {t3['base']['chi_square']:.1f} on {t3['base']['dof']} "
+            f"dof, base resistances {rs} m^2 K/W"
+            + (f" (the headline's at nominal inputs: {nominal})" if nominal else "")
+            + f", naming threshold {t3['threshold']['log_bayes_factor']:.2f} "
             f"(`validation/results/discrepancy.md`).")
     return " ".join(parts) + " Written by `validation/readme_figures.py` from those files."
 

@@ -191,6 +191,7 @@ class Discrepancy:
                     "auxiliary_predicted": m.aux_predicted.tolist(),
                     "n_observations": m.n_observations}
         return {"verdict": self.verdict, "statement": self.statement,
+                "winner_name": self.winner.name if self.winner is not None else None,
                 "groups": [{"label": g.label, "formulation": g.formulation,
                             "thickness_m": g.thickness_m, "measured": g.mean,
                             "standard_error": g.standard_error, "n": g.n}
