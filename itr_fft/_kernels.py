@@ -52,24 +52,31 @@ def _load(gd, d, hE, i, j, k, im, jm, km):  # pragma: no cover - compiled
 
 
 @njit(**_SER)
-def _row_matvec(g0, g1, g2, p, q, i, im, ip):  # pragma: no cover - compiled
+def _line_matvec(g0, g1, g2, p, q, i, im, ip, j, loc):  # pragma: no cover - compiled
+    """q = A p on the line (i, j, :); returns ``loc`` plus its p . q, added in k order."""
     n2, n3 = p.shape[1], p.shape[2]
+    jm = j - 1 if j > 0 else n2 - 1
+    jp = j + 1 if j < n2 - 1 else 0
+    # k = 0 and k = n3 - 1 wrap; the interior loop has no branches
+    for kk in range(2 if n3 > 1 else 1):
+        k = 0 if kk == 0 else n3 - 1
+        km = k - 1 if k > 0 else n3 - 1
+        kp = k + 1 if k < n3 - 1 else 0
+        s = _stencil(g0, g1, g2, p, i, j, k, im, ip, jm, jp, km, kp)
+        q[i, j, k] = s
+        loc += float(p[i, j, k]) * s
+    for k in range(1, n3 - 1):
+        s = _stencil(g0, g1, g2, p, i, j, k, im, ip, jm, jp, k - 1, k + 1)
+        q[i, j, k] = s
+        loc += float(p[i, j, k]) * s
+    return loc
+
+
+@njit(**_SER)
+def _row_matvec(g0, g1, g2, p, q, i, im, ip):  # pragma: no cover - compiled
     loc = 0.0
-    for j in range(n2):
-        jm = j - 1 if j > 0 else n2 - 1
-        jp = j + 1 if j < n2 - 1 else 0
-        # k = 0 and k = n3 - 1 wrap; the interior loop has no branches
-        for kk in range(2 if n3 > 1 else 1):
-            k = 0 if kk == 0 else n3 - 1
-            km = k - 1 if k > 0 else n3 - 1
-            kp = k + 1 if k < n3 - 1 else 0
-            s = _stencil(g0, g1, g2, p, i, j, k, im, ip, jm, jp, km, kp)
-            q[i, j, k] = s
-            loc += float(p[i, j, k]) * s
-        for k in range(1, n3 - 1):
-            s = _stencil(g0, g1, g2, p, i, j, k, im, ip, jm, jp, k - 1, k + 1)
-            q[i, j, k] = s
-            loc += float(p[i, j, k]) * s
+    for j in range(p.shape[1]):
+        loc = _line_matvec(g0, g1, g2, p, q, i, im, ip, j, loc)
     return loc
 
 
@@ -84,6 +91,69 @@ def matvec_dot(g, p, q):  # pragma: no cover - compiled
     for i in nb.prange(n1):
         part[i] = _row_matvec(g0, g1, g2, p, q, i, i - 1 if i > 0 else n1 - 1,
                               i + 1 if i < n1 - 1 else 0)
+    return part.sum()
+
+
+@njit(**_SER)
+def _row_matvec_block(g0, g1, g2, ps, qs, i, im, ip, part):  # pragma: no cover - compiled
+    """Every field of the block on row i, line by line (a line of g stays in the L1 cache
+    for all of them); ``part[c, i]`` gets field c's p . q of the row, in the order of
+    :func:`_row_matvec`."""
+    m = len(ps)
+    for c in range(m):
+        part[c, i] = 0.0
+    for j in range(ps[0].shape[1]):
+        for c in range(m):
+            part[c, i] = _line_matvec(g0, g1, g2, ps[c], qs[c], i, im, ip, j, part[c, i])
+
+
+@njit(**_PAR)
+def matvec_dot_block(g, ps, qs):  # pragma: no cover - compiled
+    """qs[c] = A ps[c] for every field c of the tuples ``ps``, ``qs`` (one pass over g);
+    returns the ps[c] . qs[c], each as :func:`matvec_dot` computes it."""
+    n1 = ps[0].shape[0]
+    m = len(ps)
+    g0 = g[0]
+    g1 = g[1]
+    g2 = g[2]
+    part = np.zeros((m, n1))
+    for i in nb.prange(n1):
+        _row_matvec_block(g0, g1, g2, ps, qs, i, i - 1 if i > 0 else n1 - 1,
+                          i + 1 if i < n1 - 1 else 0, part)
+    out = np.zeros(m)
+    for c in range(m):
+        out[c] = part[c].sum()
+    return out
+
+
+@njit(**_SER)
+def _row_residual_into(g0, g1, g2, x, b, out, i, im, ip):  # pragma: no cover - compiled
+    n2, n3 = x.shape[1], x.shape[2]
+    loc = 0.0
+    for j in range(n2):
+        jm = j - 1 if j > 0 else n2 - 1
+        jp = j + 1 if j < n2 - 1 else 0
+        for k in range(n3):
+            km = k - 1 if k > 0 else n3 - 1
+            kp = k + 1 if k < n3 - 1 else 0
+            v = float(b[i, j, k]) - _stencil(g0, g1, g2, x, i, j, k, im, ip, jm, jp, km, kp)
+            out[i, j, k] = v
+            loc += v * v
+    return loc
+
+
+@njit(**_PAR)
+def residual_into(g, x, b, out):  # pragma: no cover - compiled
+    """out = b - A x, formed in float64 and then stored in out's precision; returns the
+    float64 ||b - A x||^2 (before that rounding)."""
+    n1 = x.shape[0]
+    g0 = g[0]
+    g1 = g[1]
+    g2 = g[2]
+    part = np.zeros(n1)
+    for i in nb.prange(n1):
+        part[i] = _row_residual_into(g0, g1, g2, x, b, out, i, i - 1 if i > 0 else n1 - 1,
+                                     i + 1 if i < n1 - 1 else 0)
     return part.sum()
 
 

@@ -37,7 +37,7 @@ from itr_fv.discrete.face_classes import to_host
 from itr_fv.discrete.operator import apply_operator
 from itr_fv.discrete.problem import DiscreteSystem
 from itr_fv.solvers.backends import Backend, LoadCaseSolution, PreparedSystem, register_backend
-from itr_fv.solvers.krylov import ArrayOps, conjugate_gradients
+from itr_fv.solvers.krylov import ArrayOps, block_conjugate_gradients
 
 from .numba_backend import check_float32_tol, float_dtype
 from .spectral import inverse_laplacian, reference_conductance
@@ -188,6 +188,9 @@ class ArrayAPIOps(ArrayOps):
     def like(self, z: Any, x: Any) -> Any:
         return z if z.dtype == x.dtype else self.xp.astype(z, x.dtype)
 
+    def copy_into(self, dst: Any, src: Any) -> None:
+        dst[...] = self.like(src, dst)
+
     def empty_like(self, x: Any) -> Any:
         return self.xp.zeros_like(x)
 
@@ -302,17 +305,29 @@ class _Prepared(PreparedSystem):
         """A host NumPy copy of one of this system's device arrays."""
         return to_numpy(x)
 
-    def solve(self, b, x0, tol, maxiter, callback=None) -> LoadCaseSolution:
+    def solve_block(self, loads, starts, tol, maxiter, callback=None
+                    ) -> list[LoadCaseSolution]:
+        """The load cases in lockstep (:func:`~itr_fv.solvers.krylov.block_conjugate_gradients`):
+        the same iterates as one at a time; with the fused kernels the operator products
+        of one iteration are one launch that reads g once."""
         xp = self.xp
-        bx = xp.astype(xp.asarray(b, device=self.dev), self.dtype, copy=False)
-        x = (xp.zeros(bx.shape, dtype=self.dtype, device=self.dev) if x0 is None else
-             xp.asarray(np.array(x0, dtype=np.float64), dtype=self.dtype, device=self.dev))
-        out = conjugate_gradients(self.operator, bx, x, tol=tol, maxiter=maxiter,
-                                  preconditioner=self.preconditioner, callback=callback,
-                                  ops=self.ops, project=self._project)
-        del bx
-        theta = xp.astype(x, xp.float64, copy=False)
-        return LoadCaseSolution(theta, out.iterations, out.history, out.residual, out.restarts)
+        bxs = [xp.astype(xp.asarray(b, device=self.dev), self.dtype, copy=False)
+               for b in loads]
+        xs = [xp.zeros(bx.shape, dtype=self.dtype, device=self.dev) if x0 is None else
+              xp.asarray(np.array(x0, dtype=np.float64), dtype=self.dtype, device=self.dev)
+              for bx, x0 in zip(bxs, starts)]
+        outs = block_conjugate_gradients(self.operator, bxs, xs, tol=tol, maxiter=maxiter,
+                                         preconditioner=self.preconditioner,
+                                         callback=callback, ops=self.ops,
+                                         project=self._project)
+        del bxs
+        return [LoadCaseSolution(xp.astype(x, xp.float64, copy=False), out.iterations,
+                                 out.history, out.residual, out.restarts)
+                for x, out in zip(xs, outs)]
+
+    def solve(self, b, x0, tol, maxiter, callback=None) -> LoadCaseSolution:
+        step = None if callback is None else (lambda _c, it, res: callback(it, res))
+        return self.solve_block([b], [x0], tol, maxiter, step)[0]
 
 
 @register_backend
@@ -379,15 +394,15 @@ class ArrayAPIBackend(Backend):
         return self.fft_dtype
 
     def _array_bytes_per_voxel(self) -> int:
-        # 3 conductances and 4 CG vectors in dtype, the float64 load vector and solutions
-        # of two earlier load cases, the half spectrum (complex) in fft_dtype and 3
-        # temporaries
-        # temporaries; the face classes the conductances are built from (int32 slots per
-        # axis and the material ids: 16 B); the multigrid's hierarchy and its peak during an
-        # application (28 + 56 B, measured with tracemalloc at 64^3, AlN-60)
+        # 3 conductances and, for each of the three load cases solved together, 4 CG
+        # vectors in dtype and its float64 load vector and solution; the half spectrum
+        # (complex) in fft_dtype and 3 temporaries; the face classes the conductances are
+        # built from (int32 slots per axis and the material ids: 16 B); the multigrid's
+        # hierarchy and its peak during an application (28 + 56 B, measured with
+        # tracemalloc at 64^3, AlN-60)
         item, fft = self.dtype.itemsize, self.fft_dtype_for().itemsize
         mg = 84 if self.preconditioner == "multigrid" else 0
-        return int(math.ceil(item * (3 + 4 + 3) + 8 * 3 + 2 * fft + 16 + mg))
+        return int(math.ceil(item * (3 + 3 * 4 + 3) + 8 * 6 + 2 * fft + 16 + mg))
 
     def bytes_per_voxel(self) -> int:
         # the arrays (on the host on a CPU; counted here on a GPU too, to stay on the safe

@@ -229,12 +229,40 @@ def _operator_kernels(stencil: SimpleNamespace, block_sum: Any) -> SimpleNamespa
         block_sum(cache, acc, partial)
 
     @cuda.jit
+    def apply_dot3(g, x0, x1, x2, o0, o1, o2, m, n1, n2, n3, part0, part1, part2):
+        """o_f = A x_f and the block partials of x_f . o_f for the first m (1 to 3) fields,
+        each as :func:`apply_dot` computes it; g comes from the cache for the second and
+        third field. Traffic (2 m + 3) N."""
+        c0 = cuda.shared.array(MAX_THREADS_PER_BLOCK, float64)
+        c1 = cuda.shared.array(MAX_THREADS_PER_BLOCK, float64)
+        c2 = cuda.shared.array(MAX_THREADS_PER_BLOCK, float64)
+        a0 = 0.0
+        a1 = 0.0
+        a2 = 0.0
+        for t in range(cuda.grid(1), x0.size, cuda.gridsize(1)):
+            v = stencil_at(g, x0, t, n1, n2, n3)
+            o0[t] = v
+            a0 += float(x0[t]) * float(v)
+            if m > 1:
+                v = stencil_at(g, x1, t, n1, n2, n3)
+                o1[t] = v
+                a1 += float(x1[t]) * float(v)
+            if m > 2:
+                v = stencil_at(g, x2, t, n1, n2, n3)
+                o2[t] = v
+                a2 += float(x2[t]) * float(v)
+        block_sum(c0, a0, part0)
+        block_sum(c1, a1, part1)
+        block_sum(c2, a2, part2)
+
+    @cuda.jit
     def apply_block(g, x, out, n1, n2, n3):
         """out_f = A x_f, f = 0, 1, 2, g read once for the three. Traffic 9 N."""
         for t in range(cuda.grid(1), x.shape[1], cuda.gridsize(1)):
             out[0, t], out[1, t], out[2, t] = stencil3_at(g, x, t, n1, n2, n3)
 
-    return SimpleNamespace(apply=apply, apply_dot=apply_dot, apply_block=apply_block)
+    return SimpleNamespace(apply=apply, apply_dot=apply_dot, apply_dot3=apply_dot3,
+                           apply_block=apply_block)
 
 
 def _vector_kernels(block_sum: Any) -> SimpleNamespace:
@@ -313,6 +341,7 @@ class _Launcher:
         self.max_blocks = int(max_blocks)
         self.kernels = _kernels()
         self.partial = cuda.device_array(self.max_blocks, dtype=np.float64)
+        self.partials = cuda.device_array((3, self.max_blocks), dtype=np.float64)
 
     def blocks(self, n: int) -> int:
         """Blocks of a launch over n items."""
@@ -327,6 +356,15 @@ class _Launcher:
         blocks = self.blocks(n)
         getattr(self.kernels, name)[blocks, self.threads](*args, self.partial)
         return float(np.sum(self.partial[:blocks].copy_to_host()))
+
+    def reduce3(self, name: str, n: int, *args: Any) -> np.ndarray:
+        """Kernel ``name`` over n items with three partials buffers last; their three
+        float64 sums (each summed as :meth:`reduce` sums one)."""
+        blocks = self.blocks(n)
+        p = self.partials
+        getattr(self.kernels, name)[blocks, self.threads](*args, p[0], p[1], p[2])
+        host = p[:, :blocks].copy_to_host()
+        return np.array([float(np.sum(host[f])) for f in range(3)])
 
 
 def _flat(a: Any, name: str, lead: tuple[int, ...] = ()) -> Any:
@@ -399,6 +437,25 @@ class FusedOperator:
         """``out = A x``; returns ``x . out`` (float64), in one pass."""
         xf, of = self._fields(x, out)
         return self.launcher.reduce("apply_dot", xf.size, self.g, xf, of, *self.shape)
+
+    def apply_dot_block(self, xs: Any, outs: Any) -> list[float]:
+        """``outs[f] = A xs[f]`` for up to three fields in one launch (g read once); returns
+        the ``xs[f] . outs[f]``, each as :meth:`apply_dot` gives it (more than three fields
+        go three at a time)."""
+        if len(xs) != len(outs):
+            raise ValueError(f"outs: expected {len(xs)} fields, got {len(outs)}")
+        dots: list[float] = []
+        for start in range(0, len(xs), 3):
+            fields = [self._fields(x, o) for x, o in zip(xs[start:start + 3],
+                                                      outs[start:start + 3])]
+            m = len(fields)
+            fields += [fields[-1]] * (3 - m)  # unused slots: never touched (m < 3)
+            xf = [f[0] for f in fields]
+            of = [f[1] for f in fields]
+            sums = self.launcher.reduce3("apply_dot3", xf[0].size, self.g, *xf, *of, m,
+                                         *self.shape)
+            dots += [float(v) for v in sums[:m]]
+        return dots
 
     def apply_block(self, x: Any, out: Any) -> None:
         """``out[f] = A x[f]`` for f = 0, 1, 2 (shape (3, n1, n2, n3)), g read once."""

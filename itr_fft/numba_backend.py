@@ -39,7 +39,7 @@ import scipy.fft
 
 from itr_fv.discrete.problem import DiscreteSystem
 from itr_fv.solvers.backends import Backend, LoadCaseSolution, PreparedSystem, register_backend
-from itr_fv.solvers.krylov import ArrayOps, conjugate_gradients
+from itr_fv.solvers.krylov import ArrayOps, block_conjugate_gradients, conjugate_gradients
 
 from . import _kernels as K
 from . import _mg_kernels as MG
@@ -48,6 +48,7 @@ from .multigrid import MG_BYTES_PER_VOXEL, AggregationMultigrid
 from .spectral import laplacian_symbol, reference_conductance
 
 __all__ = ["NumbaFFTBackend", "reference_conductance", "FLOAT32_MIN_TOL", "float32_min_tol",
+           "PRECISIONS", "MIXED_MIN_TOL", "REPLACE_BELOW",
            "choose_preconditioner", "AUTO_CONTRAST", "PRECONDITIONERS",
            "FFT_BYTES_PER_VOXEL"]
 
@@ -80,6 +81,25 @@ def check_float32_tol(dtype: np.dtype, shape: Sequence[int], tol: float,
         raise ValueError(f"tol: {tol:.1e} is below what float32 vectors can reach on "
                          f"this grid ({floor:.1e}); use dtype=numpy.float64")
 
+
+#: CG precisions of :class:`NumbaFFTBackend` (its ``precision``).
+PRECISIONS = ("double", "mixed")
+
+#: Mixed precision: the recursive float32 residual is replaced by the float64 true one
+#: whenever it has fallen below this factor times the last true one.
+REPLACE_BELOW = 0.1
+
+#: Smallest tol accepted with ``precision="mixed"``: measured at 64^3 on al2o3_60,
+#: aln_60, random30_Rinf and fcc_R1e-6 of the common set, mixed precision reached 1e-12 on
+#: the float64 residual in the iterations of double precision (at most 2 more) with k
+#: within 2e-12 of it (validation/results/bench_limit.md).
+MIXED_MIN_TOL = 1e-12
+
+#: Extra bytes per voxel of mixed precision (the float32 copy of the conductances, less
+#: the float32 work vectors' saving) and of each load case solved beside the first in a
+#: block (its load vector, x, r, p, q), rounded up.
+MIXED_BYTES_PER_VOXEL = 12
+BLOCK_BYTES_PER_CASE = 48
 
 #: Preconditioners of :class:`NumbaFFTBackend`: the FFT Laplacian inverse, particle
 #: deflation around an aggregation-multigrid V-cycle (:mod:`itr_fft.multigrid`,
@@ -173,7 +193,8 @@ class _MultigridPreconditioner:
 
 
 class _StencilOperator:
-    """The 7-point operator of the face conductances g, matrix-free (fused numba stencil)."""
+    """The 7-point operator of the face conductances g, matrix-free (fused numba stencil);
+    several fields at once with g read once (``apply_dot_block``)."""
 
     def __init__(self, g: np.ndarray) -> None:
         self.g = g
@@ -183,6 +204,11 @@ class _StencilOperator:
 
     def apply_dot(self, x: np.ndarray, out: np.ndarray) -> float:
         return K.matvec_dot(self.g, x, out)
+
+    def apply_dot_block(self, xs: Sequence[np.ndarray], outs: Sequence[np.ndarray]
+                        ) -> np.ndarray:
+        """``outs[c] = A xs[c]`` for every c in one pass over g; returns the xs[c] . outs[c]."""
+        return K.matvec_dot_block(self.g, tuple(xs), tuple(outs))
 
 
 class _FusedOps(ArrayOps):
@@ -197,8 +223,24 @@ class _FusedOps(ArrayOps):
     def direction(self, p, z, beta) -> None:
         K.direction_update(p, z, beta)
 
+    def residual(self, operator, b, x, out) -> float:
+        """out = b - A x formed in float64 (then stored in out's precision); returns its
+        float64 squared norm."""
+        return K.residual_into(operator.g, x, b, out)
+
+    def copy_into(self, dst, src) -> None:
+        np.copyto(dst, src, casting="same_kind")
+
+
+class _MixedOps(_FusedOps):
+    """The same operations with float32 work vectors r, p, q (x stays float64)."""
+
+    def empty_like(self, x: np.ndarray) -> np.ndarray:
+        return np.empty(x.shape, dtype=np.float32)
+
 
 _OPS = _FusedOps()
+_MIXED_OPS = _MixedOps()
 
 
 class _PreparedFFT(PreparedSystem):
@@ -208,6 +250,7 @@ class _PreparedFFT(PreparedSystem):
         shape = g.shape[1:]
         self.g = g
         self.dtype = backend.dtype
+        self.block = backend.block
         self.workers = backend.threads_for(shape)
         self.labels_flat = self.counts = None
         if system.labels is not None:
@@ -215,7 +258,13 @@ class _PreparedFFT(PreparedSystem):
             self.counts = np.bincount(self.labels_flat).astype(np.float64)
         g_ref = reference_conductance(g, backend.reference)
         fdt = backend.dtype if backend.dtype == np.float32 else backend.fft_dtype
-        self.operator = _StencilOperator(g)
+        self.mixed = backend.precision == "mixed"
+        if self.mixed:  # CG iterates on float32 copies; x and the true residual in float64
+            self.operator = _StencilOperator(np.ascontiguousarray(g, dtype=np.float32))
+            self.true_operator, self.ops = _StencilOperator(g), _MIXED_OPS
+        else:
+            self.operator = _StencilOperator(g)
+            self.true_operator, self.ops = None, _OPS
         self._old_threads = numba.get_num_threads()
         numba.set_num_threads(self.workers)
         kind = backend.preconditioner
@@ -229,7 +278,8 @@ class _PreparedFFT(PreparedSystem):
                                                   self.labels_flat, self.counts, fdt)
         self.info = {"g_ref": g_ref, "k_ref": g_ref * voxel_m, "dtype": self.dtype.name,
                      "fft_dtype": fdt.name, "workers": self.workers,
-                     "preconditioner": kind}
+                     "preconditioner": kind, "precision": backend.precision,
+                     "block": self.block}
         if kind == "multigrid":
             pre = self.preconditioner
             self.info["levels"] = pre.multigrid.n_levels
@@ -239,15 +289,35 @@ class _PreparedFFT(PreparedSystem):
     def _project(self, v: np.ndarray) -> None:
         K.project_clusters(v, self.labels_flat, self.counts)
 
-    def solve(self, b, x0, tol, maxiter, callback=None) -> LoadCaseSolution:
-        x = np.zeros(b.shape, dtype=self.dtype) if x0 is None else \
+    def _start(self, b: np.ndarray, x0: np.ndarray | None) -> np.ndarray:
+        return np.zeros(b.shape, dtype=self.dtype) if x0 is None else \
             np.array(x0, dtype=self.dtype, copy=True)
-        out = conjugate_gradients(self.operator, b, x, tol=tol, maxiter=maxiter,
-                                  preconditioner=self.preconditioner, callback=callback,
-                                  ops=_OPS,
-                                  project=None if self.labels_flat is None else self._project)
-        theta = x if self.dtype == np.float64 else x.astype(np.float64)
-        return LoadCaseSolution(theta, out.iterations, out.history, out.residual, out.restarts)
+
+    def solve_block(self, loads, starts, tol, maxiter, callback=None
+                    ) -> list[LoadCaseSolution]:
+        xs = [self._start(b, x0) for b, x0 in zip(loads, starts)]
+        options = dict(tol=tol, maxiter=maxiter, preconditioner=self.preconditioner,
+                       ops=self.ops,
+                       project=None if self.labels_flat is None else self._project,
+                       true_operator=self.true_operator,
+                       replace_below=REPLACE_BELOW if self.mixed else None)
+        if self.block:
+            outs = block_conjugate_gradients(self.operator, loads, xs, callback=callback,
+                                             **options)
+        else:
+            outs = [conjugate_gradients(
+                self.operator, b, x, **options,
+                callback=None if callback is None else
+                (lambda it, res, _c=c: callback(_c, it, res)))
+                for c, (b, x) in enumerate(zip(loads, xs))]
+        return [LoadCaseSolution(x if self.dtype == np.float64 else x.astype(np.float64),
+                                 out.iterations, out.history, out.residual, out.restarts,
+                                 out.replacements)
+                for x, out in zip(xs, outs)]
+
+    def solve(self, b, x0, tol, maxiter, callback=None) -> LoadCaseSolution:
+        step = None if callback is None else (lambda _c, it, res: callback(it, res))
+        return self.solve_block([b], [x0], tol, maxiter, step)[0]
 
     def close(self) -> None:
         numba.set_num_threads(self._old_threads)
@@ -297,6 +367,21 @@ class NumbaFFTBackend(Backend):
         aggregates stop at resistive interfaces (:mod:`itr_fft.multigrid`), in float32;
         measured in
         ``validation/results/bench_preconditioners.md``.
+    precision : {"double", "mixed"}
+        ``"double"`` (default): CG in ``dtype``. ``"mixed"``: CG iterates on a float32 copy
+        of the conductances with float32 work vectors r, p, q (reductions in float64), x
+        stays float64, and the float64 true residual replaces the recursive one whenever
+        that has fallen tenfold (reliable updates), so ``tol`` holds on the float64
+        residual as in ``"double"``; needs ``dtype=np.float64`` and ``tol >=``
+        :data:`MIXED_MIN_TOL`. Measured against ``"double"`` in
+        ``validation/results/bench_limit.md``.
+    block : bool
+        Solve the load cases of one call together: one CG per load case in lockstep, each
+        conductance read once per iteration for all of them (the same iterates as one at a
+        time), at 96 more bytes per voxel for three load cases. Default False (one after
+        the other): on 2 cores the block measured 0.94-1.05x the time of single solves
+        (validation/results/bench_limit.md), the stencil kernel being bound by its
+        arithmetic there, not by memory traffic.
     """
 
     name = "itr_fft"
@@ -304,12 +389,22 @@ class NumbaFFTBackend(Backend):
 
     def __init__(self, dtype: Any = np.float64, workers: int | None = None,
                  reference: str | float = "geometric", fft_dtype: Any = np.float32,
-                 preconditioner: str = "auto") -> None:
+                 preconditioner: str = "auto", precision: str = "double",
+                 block: bool = False) -> None:
         if preconditioner not in PRECONDITIONERS:
             raise ValueError(f"preconditioner: expected one of {PRECONDITIONERS}, got "
                              f"{preconditioner!r}")
         self.preconditioner = preconditioner
         self.dtype = float_dtype(dtype, "dtype")
+        if precision not in PRECISIONS:
+            raise ValueError(f"precision: expected one of {PRECISIONS}, got {precision!r}")
+        if precision == "mixed" and self.dtype != np.float64:
+            raise ValueError("precision: 'mixed' keeps theta in float64 and iterates in "
+                             "float32; use dtype=numpy.float64 with it")
+        self.precision = precision
+        if not isinstance(block, (bool, np.bool_)):
+            raise ValueError(f"block: expected True or False, got {block!r}")
+        self.block = bool(block)
         self.fft_dtype = float_dtype(fft_dtype, "fft_dtype")
         if workers is not None and (isinstance(workers, bool) or
                                     not isinstance(workers, (int, np.integer)) or workers < 1):
@@ -324,18 +419,28 @@ class NumbaFFTBackend(Backend):
         self.reference = reference
 
     def bytes_per_voxel(self) -> int:
+        per = FFT_BYTES_PER_VOXEL
+        if self.precision == "mixed":
+            per += MIXED_BYTES_PER_VOXEL
+        if self.block:
+            per += 2 * BLOCK_BYTES_PER_CASE
         if self.preconditioner != "fft":  # "auto" may take the multigrid
-            return FFT_BYTES_PER_VOXEL + MG_BYTES_PER_VOXEL
-        return FFT_BYTES_PER_VOXEL
+            per += MG_BYTES_PER_VOXEL
+        return per
 
     def options(self) -> dict[str, Any]:
         opts = {"dtype": self.dtype.name, "workers": self.workers,
                 "reference": self.reference, "fft_dtype": self.fft_dtype.name}
         opts["preconditioner"] = self.preconditioner
+        opts["precision"] = self.precision
+        opts["block"] = self.block
         return opts
 
     def check(self, shape: tuple[int, int, int], tol: float) -> None:
         check_float32_tol(self.dtype, shape, tol)
+        if self.precision == "mixed" and tol < MIXED_MIN_TOL:
+            raise ValueError(f"tol: {tol:.1e} is below what precision='mixed' is measured "
+                             f"to reach ({MIXED_MIN_TOL:.0e}); use precision='double'")
 
     def threads_for(self, shape: Sequence[int]) -> int:
         """Threads used on this grid (threads do not pay below ~40^3 voxels)."""

@@ -75,13 +75,13 @@ class _Recording(ArrayAPIBackend):
     def prepare(self, system, voxel_m):
         self.conductances = system.g  # as the driver built them for this backend
         prepared = super().prepare(system, voxel_m)
-        solve = prepared.solve
+        solve_block = prepared.solve_block
 
-        def recording(b, *args):
-            self.loads.append(b)
-            return solve(b, *args)
+        def recording(loads, *args):
+            self.loads.extend(loads)
+            return solve_block(loads, *args)
 
-        prepared.solve = recording
+        prepared.solve_block = recording
         return prepared
 
 

@@ -25,6 +25,8 @@ ROOT = Path(__file__).resolve().parents[1]
 SHAPES = ((5, 6, 7), (8, 8, 8))
 #: The simulator runs one Python thread per GPU thread: few threads, grid-stride loops.
 LAUNCH = {"threads_per_block": 8, "max_blocks": 4}
+#: Common-set RVEs of the block CG check (at 6^3: the simulator is slow).
+BLOCK_CASES = ("bcc_R1e-8",)
 
 
 def _rel(a: Any, ref: Any) -> float:
@@ -141,6 +143,40 @@ def _cg_check(rng: np.random.Generator) -> dict[str, float]:
             "restarts_fused": of.restarts}
 
 
+def _block_cg_check() -> dict[str, float]:
+    """Three load cases of a common-set RVE (small grid) by the block CG with the fused
+    block kernel, against three single CG solves with the fused kernels."""
+    from itr_fft.array_api_backend import _FFTPreconditioner
+    from itr_fft.fused_kernels import FusedOperator, FusedOps
+    from itr_fft.spectral import reference_conductance
+    from itr_fv.discrete.operator import load_vector
+    from itr_fv.discrete.problem import DiscreteProblem
+    from itr_fv.solvers.krylov import block_conjugate_gradients, conjugate_gradients
+    from validation.gallery import build
+    out: dict[str, float] = {}
+    for case in BLOCK_CASES:  # the simulator takes ~1 s per CG iteration at 6^3
+        ms, mat = build(case, 6)
+        g = DiscreteProblem.for_materials(ms, mat).system(mat).g
+        shape, h = g.shape[1:], ms.voxel_m
+        loads = [load_vector(g, h, tuple(float(k == d) for k in range(3))) for d in range(3)]
+        pre = _FFTPreconditioner(_xp(), None, shape, reference_conductance(g), np.float64,
+                                 None)
+        op, ops = FusedOperator(g, **LAUNCH), FusedOps(**LAUNCH)
+        xs = [np.zeros(shape) for _ in loads]
+        block = block_conjugate_gradients(op, loads, xs, tol=1e-10, maxiter=300,
+                                          preconditioner=pre, ops=ops)
+        diff, same = 0.0, 1.0
+        for b, x, o in zip(loads, xs, block):
+            x1 = np.zeros(shape)
+            o1 = conjugate_gradients(op, b, x1, tol=1e-10, maxiter=300, preconditioner=pre,
+                                     ops=ops)
+            diff = max(diff, _rel(x, x1))
+            same = min(same, float(o.iterations == o1.iterations and o.residual <= 1e-10))
+        out[f"{case}_solution"] = diff
+        out[f"{case}_same_iterations"] = same
+    return out
+
+
 def _main() -> None:
     from itr_fft.fused_kernels import fused_available
     rng = np.random.default_rng(20261126)
@@ -148,7 +184,7 @@ def _main() -> None:
                "block": _block_check(rng),
                "update": {"float64": _update_case(rng, np.float64),
                           "float32": _update_case(rng, np.float32)},
-               "cg": _cg_check(rng)}
+               "cg": _cg_check(rng), "block_cg": _block_cg_check()}
     print(json.dumps(results))
 
 
@@ -208,6 +244,13 @@ def test_cg_with_fused_kernels_matches_array_api_cg(simulated):
     assert got["solution"] < 1e-12
     assert got["true_residual"] < 1e-10
     assert got["restarts_fused"] == 0
+
+
+@pytest.mark.parametrize("case", BLOCK_CASES)
+def test_block_cg_with_the_fused_block_kernel_equals_single_solves(simulated, case):
+    got = simulated["block_cg"]
+    assert got[f"{case}_same_iterations"] == 1.0
+    assert got[f"{case}_solution"] <= 1e-10
 
 
 def test_bad_input_is_named_without_a_device():

@@ -8,9 +8,10 @@ checks, the system's face conductances, load vectors, the gauge, the result). A 
 - states its peak memory per voxel (:meth:`Backend.bytes_per_voxel`, used by the memory
   guard before any work),
 - prepares one system (:meth:`Backend.prepare`: the AMG hierarchy, the FFT symbols and
-  ``g_ref``), and the prepared system solves one load case at a time with
-  ``solve(b, x0, tol, maxiter, callback)``, written over
-  :func:`itr_fv.solvers.krylov.conjugate_gradients`.
+  ``g_ref``), and the prepared system solves the load cases with
+  ``solve_block(loads, starts, tol, maxiter, callback)`` (by default one at a time with
+  ``solve(b, x0, tol, maxiter, callback)``; a backend that reads its conductances once for
+  all of them overrides it), written over :mod:`itr_fv.solvers.krylov`.
 
 A prepared system may keep its arrays on its own device (a GPU): it states where they live
 with the namespace ``xp``, the face conductances ``g`` and the cluster projection
@@ -31,7 +32,7 @@ from __future__ import annotations
 
 import importlib.metadata
 from abc import ABC, abstractmethod
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -48,6 +49,8 @@ ENTRY_POINT_GROUP = "itr.backends"
 
 #: ``callback(iteration, relative_residual)`` of a backend's solve.
 IterationCallback = Callable[[int, float], None]
+#: ``callback(case, iteration, relative_residual)`` of a backend's block solve.
+BlockCallback = Callable[[int, int, float], None]
 
 
 @dataclass
@@ -69,6 +72,8 @@ class LoadCaseSolution:
     restarts : int
         CG restarts (recursive residual below ``tol`` while the true one was not, or a
         breakdown).
+    replacements : int
+        Reliable updates of mixed precision (the true residual replaced the recursive one).
     """
 
     x: np.ndarray
@@ -76,6 +81,7 @@ class LoadCaseSolution:
     history: list[float]
     residual: float
     restarts: int = 0
+    replacements: int = 0
 
 
 class PreparedSystem(ABC):
@@ -124,6 +130,32 @@ class PreparedSystem(ABC):
         callback : callable, optional
             ``callback(iteration, relative_residual)`` after every iteration.
         """
+
+    def solve_block(self, loads: Sequence[Any], starts: Sequence[np.ndarray | None],
+                    tol: float, maxiter: int,
+                    callback: BlockCallback | None = None) -> list[LoadCaseSolution]:
+        """Solve several load cases of this system (the driver's one call).
+
+        A backend that can solve them together (one pass over the conductances for all)
+        overrides this; the default solves them one after the other with :meth:`solve`.
+
+        Parameters
+        ----------
+        loads : sequence of arrays
+            Load vectors, as ``b`` of :meth:`solve`.
+        starts : sequence of ndarray or None
+            One start per load (None: zero).
+        tol, maxiter
+            As :meth:`solve` (``maxiter`` per load case).
+        callback : callable, optional
+            ``callback(case, iteration, relative_residual)``, ``case`` the position in
+            ``loads``.
+        """
+        out = []
+        for c, (b, x0) in enumerate(zip(loads, starts)):
+            step = None if callback is None else (lambda it, res, _c=c: callback(_c, it, res))
+            out.append(self.solve(b, x0, tol, maxiter, step))
+        return out
 
     def close(self) -> None:
         """Give back what the preparation holds (threads, device memory); called by the

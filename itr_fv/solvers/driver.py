@@ -291,18 +291,24 @@ def homogenize(problem: Microstructure | DiscreteProblem, mat: Materials, *,
     try:
         g, clusters = device_arrays(prepared, system)
         setup = time.perf_counter() - t0
-        records, restarts = [], []
-        for c, d in enumerate(dirs):
-            t1 = time.perf_counter()
-            b = load_vector(g, ms.voxel_m, _unit_load(d))
-            step = None if callback is None else (lambda it, res, _d=d: callback(_d, it, res))
-            sol = prepared.solve(b, None if x0 is None else x0[c], tol, maxiter, step)
-            del b
-            restarts.append(sol.restarts)
-            records.append(SolveRecord(d, sol.x, sol.iterations, sol.history, sol.residual,
-                                       time.perf_counter() - t1))
+        t1 = time.perf_counter()
+        loads = [load_vector(g, ms.voxel_m, _unit_load(d)) for d in dirs]
+        step = None if callback is None else (lambda c, it, res: callback(dirs[c], it, res))
+        sols = prepared.solve_block(loads, [None if x0 is None else x0[c]
+                                            for c in range(len(dirs))], tol, maxiter, step)
+        del loads
+        seconds = time.perf_counter() - t1
+        total = max(sum(sol.iterations for sol in sols), 1)
+        # cases solved together share the time by their iterations
+        records = [SolveRecord(d, sol.x, sol.iterations, sol.history, sol.residual,
+                               seconds * max(sol.iterations, 1) / total
+                               if len(sols) > 1 else seconds)
+                   for d, sol in zip(dirs, sols)]
+        restarts = [sol.restarts for sol in sols]
         geometry = problem.geometry
-        info = {**prepared.info, "restarts": restarts, "unknowns": int(math.prod(ms.shape)),
+        info = {**prepared.info, "restarts": restarts,
+                "replacements": [sol.replacements for sol in sols],
+                "unknowns": int(math.prod(ms.shape)),
                 "interface_faces": geometry.n_interface_faces,
                 "contact_faces": geometry.n_contact_faces, "contact": problem.contact,
                 "staircase": geometry.staircase}
