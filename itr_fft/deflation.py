@@ -66,9 +66,6 @@ class ParticleDeflation:
         shape).
     """
 
-    #: ``apply`` returns the same array every call (CG copies it where it keeps it).
-    reuses_output = True
-
     def __init__(self, g: np.ndarray, groups: np.ndarray, inner: Any) -> None:
         if groups.shape != g.shape[1:]:
             raise ValueError(f"groups: expected shape {g.shape[1:]}, got {groups.shape}")

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import math
 import os
+import time
 from collections.abc import Sequence
 from typing import Any
 
@@ -162,9 +163,6 @@ class _Preconditioner:
 
 class _MultigridPreconditioner:
     """Particle deflation around an aggregation-multigrid V-cycle, then cluster means out."""
-
-    #: With deflation, ``apply`` returns the same array every call (see the CG).
-    reuses_output = True
 
     def __init__(self, system: DiscreteSystem, labels_flat: np.ndarray | None,
                  counts: np.ndarray | None) -> None:
@@ -304,16 +302,19 @@ class _PreparedFFT(PreparedSystem):
         if self.block:
             outs = block_conjugate_gradients(self.operator, loads, xs, callback=callback,
                                              **options)
+            seconds = [None] * len(xs)
         else:
-            outs = [conjugate_gradients(
-                self.operator, b, x, **options,
-                callback=None if callback is None else
-                (lambda it, res, _c=c: callback(_c, it, res)))
-                for c, (b, x) in enumerate(zip(loads, xs))]
+            outs, seconds = [], []
+            for c, (b, x) in enumerate(zip(loads, xs)):
+                step = None if callback is None else \
+                    (lambda it, res, _c=c: callback(_c, it, res))
+                t = time.perf_counter()
+                outs.append(conjugate_gradients(self.operator, b, x, callback=step, **options))
+                seconds.append(time.perf_counter() - t)
         return [LoadCaseSolution(x if self.dtype == np.float64 else x.astype(np.float64),
                                  out.iterations, out.history, out.residual, out.restarts,
-                                 out.replacements)
-                for x, out in zip(xs, outs)]
+                                 out.replacements, s)
+                for x, out, s in zip(xs, outs, seconds)]
 
     def solve(self, b, x0, tol, maxiter, callback=None) -> LoadCaseSolution:
         step = None if callback is None else (lambda _c, it, res: callback(it, res))

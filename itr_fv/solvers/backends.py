@@ -31,6 +31,7 @@ any of them itself. Adding a backend is one module and one registration.
 from __future__ import annotations
 
 import importlib.metadata
+import time
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -74,6 +75,9 @@ class LoadCaseSolution:
         breakdown).
     replacements : int
         Reliable updates of mixed precision (the true residual replaced the recursive one).
+    seconds : float or None
+        Wall time of this load case's solve, s, where it was solved on its own; None for
+        load cases solved together (the driver shares their time by iterations).
     """
 
     x: np.ndarray
@@ -82,6 +86,7 @@ class LoadCaseSolution:
     residual: float
     restarts: int = 0
     replacements: int = 0
+    seconds: float | None = None
 
 
 class PreparedSystem(ABC):
@@ -154,7 +159,10 @@ class PreparedSystem(ABC):
         out = []
         for c, (b, x0) in enumerate(zip(loads, starts)):
             step = None if callback is None else (lambda it, res, _c=c: callback(_c, it, res))
-            out.append(self.solve(b, x0, tol, maxiter, step))
+            t = time.perf_counter()
+            sol = self.solve(b, x0, tol, maxiter, step)
+            sol.seconds = time.perf_counter() - t
+            out.append(sol)
         return out
 
     def close(self) -> None:

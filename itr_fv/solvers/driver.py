@@ -299,8 +299,10 @@ def homogenize(problem: Microstructure | DiscreteProblem, mat: Materials, *,
         del loads
         seconds = time.perf_counter() - t1
         total = max(sum(sol.iterations for sol in sols), 1)
-        # cases solved together share the time by their iterations
+        # a case solved on its own keeps its time; cases solved together share theirs by
+        # their iterations
         records = [SolveRecord(d, sol.x, sol.iterations, sol.history, sol.residual,
+                               sol.seconds if sol.seconds is not None else
                                seconds * max(sol.iterations, 1) / total
                                if len(sols) > 1 else seconds)
                    for d, sol in zip(dirs, sols)]

@@ -262,13 +262,14 @@ def conjugate_gradients(operator: Any, b: Any, x: Any, *, tol: float, maxiter: i
     -------
     CGOutcome
     """
+    ops = ArrayOps() if ops is None else ops
     steps = _cg_steps(b, x, tol=tol, maxiter=maxiter, preconditioner=preconditioner,
-                      ops=ArrayOps() if ops is None else ops,
+                      ops=ops,
                       true_operator=operator if true_operator is None else true_operator,
                       callback=callback, history=[] if residuals is None else residuals,
                       project=project, max_restarts=max_restarts,
                       replace_below=_check_replace(replace_below))
-    return _drive([steps], operator, ArrayOps() if ops is None else ops)[0]
+    return _drive([steps], operator, ops)[0]
 
 
 def block_conjugate_gradients(operator: Any, loads: Sequence[Any], starts: Sequence[Any], *,
