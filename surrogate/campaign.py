@@ -45,8 +45,9 @@ starts; an error names the key. The file::
     psd = { Al2O3 = [1.02, 0.35] } # optional: mu, sigma of ln(D / 1 um)
 
     [design]
-    kind = "grid"                  # "table4", "grid" or "space_filling"
+    kind = "grid"                  # "table4", "grid", "points" or "space_filling"
     values = { R_Al2O3_silicone = [1e-8, 1e-7] }       # grid
+    # points = [{ R_Al2O3_silicone = 1e-8 }, { R_Al2O3_silicone = 5e-8 }]  # points
     # n = 20, seed = 0, bounds = { R_Al2O3_silicone = [1e-8, 5e-5] }  # space_filling
 
 Parameter names are the package's flat names (:mod:`itr_fv.materials.parameters`). A task is one RVE
@@ -93,7 +94,7 @@ _TOP_KEYS = {"name", "box_um", "voxel_um", "replicas", "seed", "contact", "solve
              "block_size", "max_diameter_box_ratio", "min_gap_um", "film_um", "cut_voxel_um",
              "tail_quantile",
              "threads_per_worker", "matrix", "base", "formulation", "design"}
-_DESIGN_KEYS = {"table4": {"kind"}, "grid": {"kind", "values"},
+_DESIGN_KEYS = {"table4": {"kind"}, "grid": {"kind", "values"}, "points": {"kind", "points"},
                 "space_filling": {"kind", "n", "seed", "bounds"}}
 #: The file's keys that make its :class:`~itr_fv.rve.spec.RVESpec`.
 _RVE_KEYS = ("box_um", "voxel_um", "seed", "max_diameter_box_ratio", "min_gap_um",
@@ -304,6 +305,8 @@ class Campaign:
                                       matrix=self.matrix)
             if kind == "grid":
                 return designs.grid(self.design["values"])
+            if kind == "points":
+                return designs.points(self.design["points"])
             return designs.space_filling(self.design["bounds"], self.design["n"],
                                          self.design.get("seed", 0))
         except ValueError as exc:

@@ -4,6 +4,8 @@ A design is an ordered list of parameter sets, each a mapping of the package's f
 (:mod:`itr_fv.materials.parameters`) to values; names it leaves out keep the campaign's base values.
 
 - :func:`grid`: the Cartesian product of value lists (the paper's Table 4 is one).
+- :func:`points`: parameter sets listed one by one (a design that is no product, e.g.
+  the diagonal and a few off-diagonal pairs of two resistances).
 - :func:`table4`: the paper's Table 4 grid for the fillers of a formulation, from the
   shipped ``parameter_grid.csv``, under a contact model: with ``contact="area"`` the
   filler conductivity x particle-matrix x per-area contact resistance (5 x 8 x 8 = 320
@@ -24,7 +26,7 @@ import numpy as np
 from itr_fv.materials import paper_data
 from itr_fv.materials.parameters import is_log_scaled, parameter_name, parse_parameter
 
-__all__ = ["grid", "table4", "space_filling", "TABLE4_HYBRID_K"]
+__all__ = ["grid", "points", "table4", "space_filling", "TABLE4_HYBRID_K"]
 
 #: Filler conductivities the paper fixes for the hybrids (W/(m K)).
 TABLE4_HYBRID_K = {f: paper_data.paper_parameters()[parameter_name("k", f)]
@@ -59,6 +61,34 @@ def grid(values: Mapping[str, Sequence[float]]) -> list[dict[str, float]]:
         except (TypeError, ValueError):
             raise ValueError(f"grid: {name} has a value that is not a number: {vals!r}") from None
     return [dict(zip(names, combo)) for combo in itertools.product(*lists)]
+
+
+def points(sets: Sequence[Mapping[str, float]]) -> list[dict[str, float]]:
+    """The listed parameter sets, in order; every set names the same parameters.
+
+    Raises
+    ------
+    ValueError
+        For an empty list, a set that is not a table of numbers, a malformed name, or sets
+        that name different parameters (naming ``points`` and the set's index).
+    """
+    if isinstance(sets, (str, bytes, Mapping)) or not isinstance(sets, Sequence) or not sets:
+        raise ValueError("points: expected a non-empty list of parameter sets")
+    out: list[dict[str, float]] = []
+    for i, entry in enumerate(sets):
+        if not isinstance(entry, Mapping) or not entry:
+            raise ValueError(f"points: set {i} is not a table of parameter = value")
+        _check_names(list(entry), "points")
+        try:
+            one = {str(k): float(v) for k, v in entry.items()}
+        except (TypeError, ValueError):
+            raise ValueError(f"points: set {i} has a value that is not a number: "
+                             f"{dict(entry)!r}") from None
+        if out and sorted(one) != sorted(out[0]):
+            raise ValueError(f"points: set {i} names {sorted(one)}, set 0 names "
+                             f"{sorted(out[0])}")
+        out.append(one)
+    return out
 
 
 def _table4_values() -> dict[str, list[float]]:

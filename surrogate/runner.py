@@ -21,7 +21,7 @@ block from the same cold start.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -69,13 +69,15 @@ def campaign_rve(camp: Campaign, formulation: str, replica: int) -> PackedRVE:
                      matrix=camp.matrix, warn_box_cut=False)
 
 
-def run_task(campaign: dict, task: dict) -> dict:
+def run_task(campaign: dict, task: dict, packed: PackedRVE | None = None) -> dict:
     """Solve one task; returns ``{"task_id", "solves", "wall_s", "rows", "rve"}``: the
     part's rows and the RVE's particle table (``"rve"``: ``rid``, ``centers_m``,
     ``radii_m``, ``materials``, ``meta``), for the client to write.
 
     Runs on a dask worker (plain arguments: the campaign's dict form and the task's fields;
-    it writes no file).
+    it writes no file). ``packed``: the task's RVE where it was packed elsewhere
+    (:func:`campaign_rve` of the same campaign, formulation and replica, e.g. in a pool of
+    processes ahead of a GPU); default: packed here.
     """
     from itr_fv import __version__
     from itr_fv.discrete.problem import DiscreteProblem
@@ -84,7 +86,8 @@ def run_task(campaign: dict, task: dict) -> dict:
     t0 = time.perf_counter()
     camp = Campaign.from_dict(campaign)
     task = Task(**{**task, "set_indices": tuple(task["set_indices"])})
-    ms, seed = campaign_rve(camp, task.formulation, task.replica)
+    ms, seed = packed if packed is not None else campaign_rve(camp, task.formulation,
+                                                              task.replica)
     table = ms.particles
     rid = rve_id(table.centers_m, table.radii_m, list(table.material), ms.shape, ms.voxel_m,
                  table.contact)
@@ -186,8 +189,10 @@ def _client(workers: int | None, scheduler: str | None, camp: Campaign, echo: Ca
 
 def run_campaign(campaign: Campaign, folder: str | Path, *, workers: int | None = None,
                  scheduler: str | None = None, progress: bool = True,
-                 echo: Callable[[str], None] = print) -> RunSummary:
-    """Run every task of ``campaign`` whose results are not yet in ``folder``.
+                 echo: Callable[[str], None] = print,
+                 skip: Collection[str] = ()) -> RunSummary:
+    """Run every task of ``campaign`` whose results are not yet in ``folder`` (nor among
+    ``skip``).
 
     Parameters
     ----------
@@ -204,6 +209,9 @@ def run_campaign(campaign: Campaign, folder: str | Path, *, workers: int | None 
         Show a progress bar with ETA on standard error.
     echo : callable
         Where the one-line messages go.
+    skip : collection of str
+        Task ids solved elsewhere (another machine's store of the same campaign, e.g. a
+        GPU's): left out here and counted as done.
 
     Returns
     -------
@@ -213,7 +221,7 @@ def run_campaign(campaign: Campaign, folder: str | Path, *, workers: int | None 
     store = CampaignStore(folder)  # absolute in this (the client's) working directory
     store.check_for(campaign)
     tasks = campaign.tasks()
-    done = store.done_tasks()
+    done = store.done_tasks() | set(skip)
     todo = [t for t in tasks if t.task_id not in done]
     if not todo:
         echo(f"campaign {campaign.name}: all {len(tasks)} tasks are done; nothing to solve")

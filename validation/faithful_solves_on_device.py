@@ -207,6 +207,47 @@ def film2_queue(solver: str) -> list[tuple[str, object, object]]:
     return items
 
 
+def corrections58_queue(solver: str) -> list[tuple[str, object, object]]:
+    """Issue 58's rebuild of the shipped corrections (``examples/corrections.toml``,
+    corrections-v2), the work the 2-core CPU takes longest over first, packing by packing:
+
+    1. the hybrid box study (Al2O3-30-AlN-30 at 64, 80 and 96 um, 6 packings), across the
+       boxes packing by packing;
+    2. the hybrid table (4 formulations x 3 packings x 8 resistance pairs, 64 um);
+    3. the AlN table (4 formulations x 3 packings x 4 resistances, 64 um);
+    4. the hybrid tail cut (64 um, quantiles 1e-3 and 1e-5, 3 packings);
+    5. the voxel order of AlN-60 and of the hybrid (32 um at 0.25, 0.2, 0.16 um);
+    6. the rest of the plan (Al2O3, the cheap RVEs), which the CPU does in minutes.
+
+    A store folder is the campaign's name (``device__<name>`` flattened)."""
+    from itr_identify.forward.correction_plan import CorrectionPlan
+
+    plan = CorrectionPlan.from_toml(ROOT / "examples" / "corrections.toml")
+    items: list[tuple[str, object, object]] = []
+    seen: set[tuple[str, str]] = set()
+
+    def add(camps) -> None:
+        """Every task of ``camps``, replica by replica across the campaigns."""
+        tasks = [c.tasks() for c in camps]
+        for i in range(max(len(t) for t in tasks)):
+            for camp, ts in zip(camps, tasks):
+                if i < len(ts) and (camp.name, ts[i].task_id) not in seen:
+                    seen.add((camp.name, ts[i].task_id))
+                    items.append((camp.name, camp, ts[i]))
+
+    hyb = "Al2O3-AlN"
+    add(plan.study_campaigns(hyb, "boxes", solver=solver))
+    add([plan.table_campaign(hyb, solver=solver)])
+    add([plan.table_campaign("AlN", solver=solver)])
+    add(plan.study_campaigns(hyb, "tail", solver=solver))
+    add(plan.study_campaigns("AlN", "order", solver=solver))
+    add(plan.study_campaigns(hyb, "order", solver=solver))
+    for _, camp in plan.campaigns(solver=solver):
+        if not camp.name.endswith("-cheap") and not camp.name.startswith(("box47", "tail47")):
+            add([camp])
+    return items
+
+
 def queue(solver: str) -> list[tuple[str, object, list]]:
     """(store folder, campaign, tasks) in priority order, tasks interleaved across voxels."""
     from box_convergence_study import campaign_dict
@@ -259,6 +300,72 @@ def queue(solver: str) -> list[tuple[str, object, list]]:
     return items
 
 
+def _pack(camp, formulation: str, replica: int):
+    """One task's RVE, in a pool process (one numba thread each)."""
+    from itr_surrogate.runner import campaign_rve
+
+    return campaign_rve(camp, formulation, replica)
+
+
+def _pool_init() -> None:
+    import numba
+
+    numba.set_num_threads(1)
+
+
+def quick_kernels(out: Path) -> None:
+    """Where the fused CUDA kernels fail with the installed numba-cuda and NumPy (numba-cuda
+    0.30 calls ``numpy.row_stack``, gone in NumPy 2.5), alias it for this run only, check the
+    fused path against the portable one on one AlN-60 problem (96^3) and use it if equal to
+    1e-6; else the portable kernels."""
+    import numpy as np
+
+    if not hasattr(np, "row_stack"):
+        np.row_stack = np.vstack
+        log("numpy.row_stack aliased to numpy.vstack for this run (numba-cuda 0.30 calls it)",
+            out)
+    from itr_fft.array_api_backend import ArrayAPIBackend
+    from itr_fv.discrete.problem import DiscreteProblem
+    from itr_fv.solvers.driver import homogenize
+    from itr_surrogate.campaign import Campaign
+    from itr_surrogate.runner import campaign_rve
+
+    camp = Campaign.from_dict({"box_um": 24.0, "voxel_um": 0.25, "seed": 1, "contact": "gap",
+                               "formulation": [{"name": "AlN-60"}],
+                               "design": {"kind": "grid", "values": {"R_AlN_silicone": [3e-8]}}})
+    ms, _ = campaign_rve(camp, "AlN-60", 0)
+    problem = DiscreteProblem(ms, contact="gap")
+    mat = camp.materials(camp.parameter_sets(camp.formulations[0])[0])
+    k = {}
+    for kern in ("portable", "auto"):
+        try:
+            be = ArrayAPIBackend(device="cuda", preconditioner="fft", kernels=kern)
+            t = time.perf_counter()
+            res = homogenize(problem, mat, backend=be, tol=1e-8)
+            k[kern] = float(np.trace(res.k_eff) / 3)
+            log(f"fft/{kern}: k_iso {k[kern]:.8f} in {time.perf_counter() - t:.1f} s (first, "
+                f"with compiling)", out)
+        except Exception as exc:  # noqa: BLE001 - a failing variant is reported, not used
+            log(f"fft/{kern}: FAILED {type(exc).__name__}: {exc}", out)
+    fused = "auto" in k and "portable" in k and abs(k["auto"] / k["portable"] - 1) < 1e-6
+    use_backend("fft/auto" if fused else "fft/portable", out)
+
+
+def tar_stores(stores: Path, path: Path) -> None:
+    """Every store's campaign.json and parts under ``stores`` into the tar ``path``
+    (written beside and renamed: atomic)."""
+    import os
+    import tarfile
+
+    tmp = path.with_name(path.name + ".tmp")
+    with tarfile.open(tmp, "w") as tar:
+        for camp in sorted(stores.glob("*/campaign.json")):
+            tar.add(camp, arcname=str(camp.relative_to(stores)))
+            for part in sorted((camp.parent / "parts").glob("*.parquet")):
+                tar.add(part, arcname=str(part.relative_to(stores)))
+    os.replace(tmp, path)
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", required=True)
@@ -266,56 +373,95 @@ def main() -> int:
                     help="start no task after this many seconds")
     ap.add_argument("--solver", default="gpu")
     ap.add_argument("--skip-pick", action="store_true")
-    ap.add_argument("--queue", choices=("main", "hybrid", "film", "film2"), default="main")
+    ap.add_argument("--queue", choices=("main", "hybrid", "film", "film2", "corrections58"),
+                    default="main")
     ap.add_argument("--stores", default=None,
                     help="where the campaign stores go (default --out); every task's rows "
                          "also go to OUT/rows.json, one file (a device returns few files)")
     ap.add_argument("--backend", default=None,
                     help="PRECONDITIONER/KERNELS of the gpu choice without timing the "
-                         "variants (e.g. fft/portable, the one verified on an H200)")
+                         "variants (e.g. fft/portable, the one verified on an H200); 'quick': "
+                         "the fused FFT path where it equals the portable one")
+    ap.add_argument("--pack-ahead", type=int, default=0,
+                    help="pack this many tasks' RVEs ahead in a pool of processes")
+    ap.add_argument("--tar-stores", action="store_true",
+                    help="keep OUT/stores.tar (every store's campaign.json and Parquet parts, "
+                         "one file: a device returns 8 files at most) as tasks finish")
     args = ap.parse_args()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    from itr_surrogate.runner import run_tasks_here
+    from concurrent.futures import ProcessPoolExecutor
+
+    from itr_surrogate.runner import _task_dict, run_task, write_task_result
     from itr_surrogate.store import CampaignStore
 
-    if args.backend:
+    pool = None
+    if args.pack_ahead > 0:   # before any CUDA context: the pool forks
+        import multiprocessing as mp
+
+        pool = ProcessPoolExecutor(args.pack_ahead, mp_context=mp.get_context("fork"),
+                                   initializer=_pool_init)
+        for f in [pool.submit(time.sleep, 0.3) for _ in range(args.pack_ahead)]:
+            f.result()   # every process forked now, before any CUDA context
+    if args.backend == "quick":
+        quick_kernels(out)
+    elif args.backend:
         use_backend(args.backend, out)
     elif args.solver == "gpu" and not args.skip_pick:
         (out / "backend_choice.json").write_text(json.dumps(pick_backend(out), indent=1))
     items = {"main": queue, "hybrid": hybrid_queue, "film": film_queue,
-             "film2": film2_queue}[args.queue](args.solver)
+             "film2": film2_queue, "corrections58": corrections58_queue}[args.queue](args.solver)
     stores = Path(args.stores) if args.stores else out
     all_rows: dict[str, list] = {}
     log(f"{len(items)} tasks queued", out)
     opened: dict[str, CampaignStore] = {}
+
+    def store_of(fold: str, camp) -> CampaignStore:
+        if fold not in opened:
+            st = CampaignStore(stores / fold.replace("/", "__"))  # two folder levels at most
+            st.open_for(camp)
+            opened[fold] = st
+        return opened[fold]
+
+    todo = [(f, c, t) for f, c, t in items if t.task_id not in store_of(f, c).done_tasks()]
+    log(f"{len(items) - len(todo)} already done, {len(todo)} to run", out)
+    ahead: dict[int, object] = {}
     done = 0
-    for fold, camp, task in items:
+    for i, (fold, camp, task) in enumerate(todo):
         if time.perf_counter() - T0 > args.budget_s:
-            log(f"budget reached: {done} tasks run, {len(items) - done} left", out)
+            log(f"budget reached: {done} tasks run, {len(todo) - done} left", out)
             break
-        store = opened.get(fold)
-        flat = fold.replace("/", "__")   # the device returns two folder levels at most
-        if store is None:
-            store = CampaignStore(stores / flat)
-            store.check_for(camp)
-            store.open_for(camp)
-            opened[fold] = store
-        if task.task_id in store.done_tasks():
-            done += 1
-            continue
+        if pool is not None:
+            for j in range(i, min(i + args.pack_ahead, len(todo))):
+                if j not in ahead:
+                    _, c, t = todo[j]
+                    ahead[j] = pool.submit(_pack, c, t.formulation, t.replica)
+        store = store_of(fold, camp)
+        flat = fold.replace("/", "__")
         t = time.perf_counter()
-        solves, failed, _ = run_tasks_here(camp, store, [task])
+        try:
+            packed = ahead.pop(i).result() if pool is not None else None
+            tp = time.perf_counter() - t
+            result = run_task(camp.to_dict(), _task_dict(task), packed)
+        except Exception as exc:  # noqa: BLE001 - a task's failure is recorded, not fatal
+            store.record_failure(task.task_id, f"{type(exc).__name__}: {exc}")
+            log(f"{fold} {task.task_id}: FAILED {type(exc).__name__}: {exc}", out)
+            continue
+        write_task_result(store, result)
         done += 1
-        rows = store.results().to_pylist() if not failed else []
+        rows = store.results().to_pylist()
         if args.stores:
             all_rows[flat] = rows
             (out / "rows.json").write_text(json.dumps(all_rows, default=str))
         else:
             (out / f"{flat}.rows.json").write_text(json.dumps(rows, default=str))
-        ks = [f"{r['k_iso']:.4f}" for r in rows if r["task_id"] == task.task_id]
-        log(f"{fold} {task.task_id}: {solves} solves in {time.perf_counter() - t:.1f} s"
-            f"{' FAILED' if failed else ''} k_iso {ks}", out)
+        if args.tar_stores and args.stores:
+            tar_stores(stores, out / "stores.tar")
+        ks = [f"{r['k_iso']:.4f}" for r in result["rows"]]
+        log(f"{fold} {task.task_id}: {result['solves']} solves in {time.perf_counter() - t:.1f}"
+            f" s (waited {tp:.1f} s for its packing) k_iso {ks}", out)
+    if pool is not None:
+        pool.shutdown(wait=False, cancel_futures=True)
     log("end", out)
     return 0
 

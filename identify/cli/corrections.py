@@ -10,7 +10,9 @@ finished tasks are kept), and writes ``--out/corrections.json``
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
+from pathlib import Path
 
 from .core import (
     CLIError,
@@ -24,6 +26,46 @@ from .core import (
 )
 
 __all__ = ["add_parser"]
+
+
+def _solved_elsewhere(dirs: list[str] | None, name: str) -> set[str]:
+    """Task ids of campaign ``name`` finished in the run folders ``dirs`` (another machine's
+    stores of the same campaign, e.g. a GPU's): ``DIR/<name>/parts``."""
+    from itr_surrogate.store import CampaignStore
+
+    done: set[str] = set()
+    for d in dirs or ():
+        folder = Path(d) / name
+        if (folder / "campaign.json").is_file():
+            done |= CampaignStore(folder).done_tasks()
+    return done
+
+
+def _plan_table(campaigns, args) -> list[str]:
+    """The plan's lines: per campaign its grid, tasks done (here, elsewhere) and to run,
+    the solves left and their hours on this machine's cores; the total."""
+    from itr_surrogate.runner import local_workers
+    from itr_surrogate.store import CampaignStore
+    from itr_surrogate.workload import Workload, campaign_workload
+
+    lines = [f"{'campaign':<40}{'grid':>8}{'tasks':>7}{'done':>6}{'left':>6}{'solves':>8}"
+             f"{'hours':>8}"]
+    total = 0.0
+    for folder, camp in campaigns:
+        tasks = camp.tasks()
+        here = (CampaignStore(Path(args.out) / folder).done_tasks() if args.out and
+                (Path(args.out) / folder / "campaign.json").is_file() else set())
+        done = here | _solved_elsewhere(args.solved_in, camp.name)
+        left = [t for t in tasks if t.task_id not in done]
+        grid = campaign_workload(camp, label=folder).grids[0]
+        g = dataclasses.replace(grid, rves=len(left),
+                                solves=sum(len(t.set_indices) for t in left))
+        hours = Workload((g,), camp.solver, local_workers(args.workers)).seconds() / 3600
+        total += hours
+        lines.append(f"{folder:<40}{grid.n:>7}^3{len(tasks):>7}{len(tasks) - len(left):>6}"
+                     f"{len(left):>6}{g.solves:>8}{hours:>8.2f}")
+    lines.append(f"{'total':<40}{'':>8}{'':>7}{'':>6}{'':>6}{'':>8}{total:>8.2f}")
+    return lines
 
 
 def _build(args: argparse.Namespace) -> int:
@@ -46,6 +88,14 @@ def _build(args: argparse.Namespace) -> int:
         raise CLIError(str(exc), 2) from None
     solver = solver_option(args, plan.solver)
     campaigns = list(plan.campaigns(systems=systems, solver=solver, threads=args.threads))
+    if args.plan:
+        print(f"plan {plan.name}: {len(campaigns)} campaigns, solver {solver}, "
+              f"{local_workers(args.workers) or 1} worker(s) on this machine's cores; hours "
+              "of what is left (an order of magnitude)")
+        print("\n".join(_plan_table(campaigns, args)))
+        return 0
+    if not args.out:
+        raise CLIError("--out: give the run folder (or --plan to see the work)", 2)
     work = Workload(tuple(
         campaign_workload(camp, label=folder).grids[0] for folder, camp in campaigns),
         solver, local_workers(args.workers), args.scheduler)
@@ -56,11 +106,13 @@ def _build(args: argparse.Namespace) -> int:
             try:
                 summary = run_campaign(camp, out / folder, workers=args.workers,
                                        scheduler=args.scheduler,
-                                       progress=not args.no_progress)
+                                       progress=not args.no_progress,
+                                       skip=_solved_elsewhere(args.solved_in, camp.name))
             except CampaignError as exc:
                 raise CLIError(str(exc), 2) from None
             failed += summary.tasks_failed
-        data = assemble(plan, out, provenance={"solver": solver})
+        data = assemble(plan, [out, *(Path(d) for d in args.solved_in or ())],
+                        provenance={"solver": solver})
         path = write_text(out / "corrections.json", json.dumps(data, indent=1) + "\n")
         write_manifest(out, [path], {"plan": args.file, "systems": list(systems or []),
                                      "solver": solver}, job="corrections build")
@@ -102,7 +154,14 @@ def add_parser(sub) -> None:
     actions = cor.add_subparsers(dest="action", required=True, parser_class=Parser)
     build = actions.add_parser("build", help="run (or resume) a corrections file")
     build.add_argument("file", help="corrections file (TOML), e.g. examples/corrections.toml")
-    build.add_argument("--out", required=True, help="run folder (new, or this plan's)")
+    build.add_argument("--out", default=None, help="run folder (new, or this plan's)")
+    build.add_argument("--plan", action="store_true",
+                       help="print the campaigns, what is done and the hours left; solve "
+                            "nothing")
+    build.add_argument("--solved-in", action="append", default=None, metavar="DIR",
+                       help="a run folder of the same plan on another machine (e.g. a GPU's "
+                            "stores): its finished tasks are not solved again and its rows "
+                            "join the table (repeatable)")
     build.add_argument("--systems", default=None,
                        help="comma-separated systems of the file (default: all)")
     build.add_argument("--workers", type=number(int, 0, 64, lo_open=False, hi_open=False),
