@@ -1,28 +1,30 @@
-"""Issue 39's faithful solves on one lent GPU, in priority order within a time budget.
+"""Faithful solves on one lent GPU, in priority order within a time budget.
 
 The device machine has no Dask, so every task runs in this process
-(:func:`itr_surrogate.runner.run_tasks_here`), into campaign stores (one Parquet part per
-task, atomic; a run with the same solver resumes them). In order:
+(:func:`itr_surrogate.runner.run_task`), into campaign stores (one Parquet part per task,
+atomic; a run with the same solver resumes them). Queues:
 
-1. the AlN shipped corrections (``examples/corrections.toml``), coarse and fine voxel of each
-   packing one after the other, the extreme fractions first;
-2. the AlN and the hybrid truth of the recovery study (``validation/recovery_truth.py``);
-3. the hybrid shipped corrections;
-4. the voxel-bias order for AlN-60 (40 um box at 0.25, 0.2, 0.16 and 0.125 um, 2 packings);
-5. four more packings per box of the box study at 0.25 um (64, 80, 56 um).
+- ``corrections58`` (the default): issue 58's rebuild of the shipped corrections
+  (``examples/corrections.toml``), the work the 2-core CPU takes longest over first
+  (:func:`corrections58_queue`); the CPU takes the rest with ``itr corrections build ...
+  --solved-in validation/results/corrections_v2/device``;
+- ``film`` and ``film2``: issue 47's box study, contact films, tail cut and voxel order.
 
-First it times the array-API backend's variants on one AlN-60 problem (160^3) and uses the
-fastest one that agrees with the FFT-preconditioned portable path (the one verified on an
-H200 before) to 1e-5.
+``--backend quick`` uses the fused CUDA kernels where they equal the portable ones on one
+AlN-60 problem (aliasing ``numpy.row_stack``, which numba-cuda 0.30 calls and NumPy 2.5
+removed, for this run only), else the portable kernels. ``--pack-ahead N`` packs the next N
+tasks' RVEs in a pool of N processes while the GPU solves (packing a 96 um hybrid box takes
+45 s on one core).
 
-Usage (on the device, the package and its wheels installed)::
+Usage (on the device, the package and its wheels installed; the recipe in
+``../shared/gpu/README.md``)::
 
-    python validation/faithful_solves_on_device.py --out $OUT --budget-s 540 [--queue hybrid]
-    python validation/faithful_solves_on_device.py --out $OUT --budget-s 500 --queue film \
-        --backend fft/portable       # issue 47: box study, contact films, tail cut
+    python validation/faithful_solves_on_device.py --out $OUT --stores /tmp/c58 \
+        --backend quick --pack-ahead 12 --tar-stores --budget-s 500
 
-Each store is ``$OUT/<kind>__<folder>`` and every task's rows are also dumped as
-``$OUT/<kind>__<folder>.rows.json`` (the device returns two folder levels at most).
+With ``--stores`` every task's rows go to ``$OUT/rows.json`` and, with ``--tar-stores``,
+the stores (campaign.json and Parquet parts) to ``$OUT/stores.tar``: a device returns 8
+files at most. Unpack it into ``validation/results/corrections_v2/device``.
 """
 
 from __future__ import annotations
@@ -101,25 +103,6 @@ def use_backend(name: str, out: Path) -> None:
                               options={"device": "cuda", "preconditioner": pre, "kernels": kern})
     choice.SOLVERS = MappingProxyType({**choice.SOLVERS, "gpu": gpu})
     log(f"using {name}", out)
-
-
-def hybrid_queue(solver: str) -> list[tuple[str, object, object]]:
-    """The second device run: the hybrid corrections of the fraction range's two ends
-    (Al2O3-29-AlN-29, Al2O3-32.5-AlN-32.5), packing by packing, both voxels."""
-    from itr_identify.forward.correction_plan import CorrectionPlan
-
-    plan = CorrectionPlan.from_toml(ROOT / "examples" / "corrections.toml")
-    f = plan.folders("Al2O3-AlN")
-    pairs = [(f"corrections/{f[key]}", plan.faithful_campaign("Al2O3-AlN", v, solver=solver))
-             for key, v in zip(("coarse", "fine"), plan.voxels_um)]
-    items = []
-    for form in ("Al2O3-29-AlN-29", "Al2O3-32.5-AlN-32.5"):
-        for replica in range(plan.packings):
-            for fold, camp in pairs:
-                (task,) = [t for t in camp.tasks()
-                           if t.formulation == form and t.replica == replica]
-                items.append((fold, camp, task))
-    return items
 
 
 #: Issue 47's box study: boxes (um), packings per box, the packings' first seed.
@@ -248,58 +231,6 @@ def corrections58_queue(solver: str) -> list[tuple[str, object, object]]:
     return items
 
 
-def queue(solver: str) -> list[tuple[str, object, list]]:
-    """(store folder, campaign, tasks) in priority order, tasks interleaved across voxels."""
-    from box_convergence_study import campaign_dict
-    from recovery_truth import VOXELS_UM, truth_campaign
-    from recovery_truth import folder as truth_folder
-
-    from itr_identify.forward.correction_plan import CorrectionPlan
-    from itr_surrogate.campaign import Campaign
-
-    plan = CorrectionPlan.from_toml(ROOT / "examples" / "corrections.toml")
-    items: list[tuple[str, object, object]] = []
-
-    def interleave(pairs):
-        """pairs: [(folder, campaign)] of the same tasks at several voxels."""
-        tasks = [c.tasks() for _, c in pairs]
-        for i in range(len(tasks[0])):
-            for (fold, camp), ts in zip(pairs, tasks):
-                items.append((fold, camp, ts[i]))
-
-    def corrections(system):
-        f = plan.folders(system)
-        interleave([(f"corrections/{f['coarse']}",
-                     plan.faithful_campaign(system, plan.voxels_um[0], solver=solver)),
-                    (f"corrections/{f['fine']}",
-                     plan.faithful_campaign(system, plan.voxels_um[1], solver=solver))])
-
-    def truth(system):
-        interleave([(f"truth/{truth_folder(system, v)}", truth_campaign(system, v, solver=solver))
-                    for v in VOXELS_UM])
-
-    corrections("AlN")
-    truth("AlN")
-    truth("Al2O3-AlN")
-    corrections("Al2O3-AlN")
-    order = []
-    for v in (0.25, 0.2, 0.16, 0.125):
-        order.append((f"voxel_order/AlN-60-40um-{v:g}um", Campaign.from_dict({
-            "name": f"voxel-order-AlN-{v:g}", "box_um": 40.0, "voxel_um": v, "replicas": 2,
-            "seed": 1, "contact": "gap", "solver": solver, "tol": 1e-6, "block_size": 1,
-            "formulation": [{"name": "AlN-60"}],
-            "design": {"kind": "grid", "values": {"R_AlN_silicone": [3e-8]}}})))
-    interleave(order)
-    for box in (64, 80, 56):
-        pairs = []
-        for g in ("AlN", "hybrid"):
-            d = campaign_dict(g, box, 0.25, 1) | {"seed": 3, "replicas": 4, "solver": solver,
-                                                  "name": f"boxconv-{g}-{box}-0.25-s3"}
-            pairs.append((f"box/{g}-{box}um-0.25um-s3", Campaign.from_dict(d)))
-        interleave(pairs)
-    return items
-
-
 def _pack(camp, formulation: str, replica: int):
     """One task's RVE, in a pool process (one numba thread each)."""
     from itr_surrogate.runner import campaign_rve
@@ -373,8 +304,8 @@ def main() -> int:
                     help="start no task after this many seconds")
     ap.add_argument("--solver", default="gpu")
     ap.add_argument("--skip-pick", action="store_true")
-    ap.add_argument("--queue", choices=("main", "hybrid", "film", "film2", "corrections58"),
-                    default="main")
+    ap.add_argument("--queue", choices=("film", "film2", "corrections58"),
+                    default="corrections58")
     ap.add_argument("--stores", default=None,
                     help="where the campaign stores go (default --out); every task's rows "
                          "also go to OUT/rows.json, one file (a device returns few files)")
@@ -409,8 +340,8 @@ def main() -> int:
         use_backend(args.backend, out)
     elif args.solver == "gpu" and not args.skip_pick:
         (out / "backend_choice.json").write_text(json.dumps(pick_backend(out), indent=1))
-    items = {"main": queue, "hybrid": hybrid_queue, "film": film_queue,
-             "film2": film2_queue, "corrections58": corrections58_queue}[args.queue](args.solver)
+    items = {"film": film_queue, "film2": film2_queue,
+             "corrections58": corrections58_queue}[args.queue](args.solver)
     stores = Path(args.stores) if args.stores else out
     all_rows: dict[str, list] = {}
     log(f"{len(items)} tasks queued", out)

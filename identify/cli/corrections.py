@@ -1,10 +1,12 @@
 """``itr corrections build|show``: make the shipped faithful corrections, or show them.
 
 ``build`` runs a corrections file's campaigns (:mod:`itr_identify.forward.correction_plan`)
-on the campaign engine, each in its own sub-folder of ``--out`` (run it again after a kill:
-finished tasks are kept), and writes ``--out/corrections.json``
-(:func:`itr_identify.forward.shipped.assemble`); copy that over
-``identify/data/corrections.json`` to ship it. ``show`` prints a corrections file's table.
+on the campaign engine, each in its own sub-folder of ``--out`` named by the campaign (run
+it again after a kill: finished tasks are kept; ``--solved-in DIR`` counts another
+machine's finished tasks, e.g. a GPU's, as done), and writes ``--out/corrections.json``
+(:func:`itr_identify.forward.corrections_table.assemble`); copy that over
+``identify/data/corrections.json`` to ship it. ``--plan`` prints the campaigns, what is done
+and the hours left, and solves nothing. ``show`` prints a corrections file's table.
 """
 
 from __future__ import annotations
@@ -39,6 +41,16 @@ def _solved_elsewhere(dirs: list[str] | None, name: str) -> set[str]:
         if (folder / "campaign.json").is_file():
             done |= CampaignStore(folder).done_tasks()
     return done
+
+
+def _tasks_left(camp, folder: Path, solved_in: list[str] | None) -> int:
+    """Tasks of ``camp`` neither in its store ``folder`` nor solved elsewhere."""
+    from itr_surrogate.store import CampaignStore
+
+    done = _solved_elsewhere(solved_in, camp.name)
+    if (folder / "campaign.json").is_file():
+        done |= CampaignStore(folder).done_tasks()
+    return sum(t.task_id not in done for t in camp.tasks())
 
 
 def _plan_table(campaigns, args) -> list[str]:
@@ -76,7 +88,7 @@ def _build(args: argparse.Namespace) -> int:
     from itr_surrogate.workload import Workload, campaign_workload
 
     from ..forward.correction_plan import CorrectionPlan
-    from ..forward.shipped import assemble
+    from ..forward.corrections_table import assemble
 
     try:
         plan = CorrectionPlan.from_toml(args.file, system_option(args))
@@ -96,9 +108,12 @@ def _build(args: argparse.Namespace) -> int:
         return 0
     if not args.out:
         raise CLIError("--out: give the run folder (or --plan to see the work)", 2)
-    work = Workload(tuple(
-        campaign_workload(camp, label=folder).grids[0] for folder, camp in campaigns),
-        solver, local_workers(args.workers), args.scheduler)
+    left = [(f, c) for f, c in campaigns if _tasks_left(c, Path(args.out) / f, args.solved_in)]
+    if not left:   # every task is solved: assemble only (the first campaign's plan line)
+        left = campaigns[:1]
+    work = Workload(tuple(campaign_workload(camp, label=folder).grids[0]
+                          for folder, camp in left),
+                    solver, local_workers(args.workers), args.scheduler)
     failed = 0
     with output_folder(args.out, "corrections build",
                        folders=[folder for folder, _ in campaigns], workload=work) as out:
@@ -129,20 +144,30 @@ def _show(args: argparse.Namespace) -> int:
     except ValueError as exc:
         raise CLIError(str(exc), 2) from None
     prov = table.provenance
-    voxels = prov.get("voxels_per_system_um", prov.get("voxels_um"))
     print(f"corrections {prov.get('plan')} ({prov.get('date')}, commit "
-          f"{str(prov.get('commit'))[:10]}; boxes {prov.get('boxes_um')} um, voxels "
-          f"{voxels} um, packing seeds {prov.get('seeds')})")
+          f"{str(prov.get('commit'))[:10]}; contacts: {prov.get('contacts', 'earlier')}; "
+          f"table boxes {prov.get('boxes_um')} um at {prov.get('voxels_um')} um, packing "
+          f"seeds {prov.get('seeds')})")
     solver = prov.get("solver")
     for name, where in (solver.items() if isinstance(solver, dict) else [("all", solver)]):
         print(f"  solved ({name}): {where}")
-    print(f"{'formulation':<22}{'resistances (m^2 K/W)':<34}{'c':>8}{'packing sd':>12}")
+    print(f"{'formulation':<22}{'resistances (m^2 K/W)':<34}{'c':>8}{'packing sd':>12}"
+          f"{'shared sd':>11}")
     for p in table.data["points"]:
-        vals = ", ".join(f"{k.split('_')[1]} {v:.0e}" for k, v in p["values"].items())
-        print(f"{p['formulation']:<22}{vals:<34}{p['c']:>8.4f}{100 * p['packing_sd']:>11.2f}%")
+        vals = ", ".join(f"{k.split('_')[1]} {v:.1e}" for k, v in p["values"].items())
+        print(f"{p['formulation']:<22}{vals:<34}{p['c']:>8.4f}{100 * p['packing_sd']:>11.2f}%"
+              f"{100 * p.get('shared_sd', 0.0):>10.2f}%")
     for name, s in table.systems.items():
         lo, hi = s["fraction_range"]
-        print(f"fit {name}: fractions {lo:.3f}-{hi:.3f}, rms {100 * s['fit_rms']:.2f} %")
+        line = f"fit {name}: fractions {lo:.3f}-{hi:.3f}, rms {100 * s['fit_rms']:.2f} %"
+        if "shared" in s:
+            sh = s["shared"]
+            line += (f"; box {sh['box']['table_box_um']:g} -> {sh['box']['converged_um']:g} um "
+                     f"x{sh['box']['factor']:.4f} (sd {100 * sh['box']['sd']:.2f} %), tail sd "
+                     f"{100 * sh['tail']['sd']:.2f} %, voxel bias " + ", ".join(
+                         f"{100 * q['bias']:+.2f} % (order {q['order']:.2f})"
+                         for q in sh["voxel"]["points"]))
+        print(line)
     return 0
 
 

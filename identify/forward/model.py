@@ -497,12 +497,37 @@ class ForwardModel:
     @property
     def model_sd(self) -> float:
         """Relative standard uncertainty of the model's level beyond its own RVE scatter:
-        the earlier stages' spread and the faithful correction's uncertainty, in
-        quadrature."""
+        the earlier stages' spread and the faithful correction's own uncertainty, in
+        quadrature (a shipped correction's system-wide term is :meth:`shared_sd`)."""
         u = self.correction.relative_sd if self.correction is not None else 0.0
         if self.correction is None and self.shipped is not None:
             u = self._shipped_at_anchor()[1]
         return math.hypot(self.carried_scatter, u)
+
+    @property
+    def shared_system(self) -> str | None:
+        """The system whose shared correction term this model's level carries (the shipped
+        correction's system where it is in use), else None."""
+        return self.shipped.system if self.correction is None and self.shipped else None
+
+    def shared_sd(self, columns: Mapping[str, np.ndarray]) -> np.ndarray:
+        """The shipped correction's system-wide relative sd per row of ``columns`` (the box
+        step, the voxel bias and the tail cut: one term for every formulation of the
+        system), (n,); zeros where the level is not the shipped one."""
+        n = self._n_rows(columns)
+        if self.shared_system is None:
+            return np.zeros(n)
+        return self.shipped.shared_sd(columns, n)
+
+    @property
+    def packing_dof(self) -> tuple[float, int] | None:
+        """(relative sd, degrees of freedom) of the shipped correction's packing term at the
+        anchor (a pooled estimate: its dof enter the likelihood's Student t), or None."""
+        if self.shared_system is None:
+            return None
+        at = self.anchor or self.centre
+        p = self.shipped.parts({q: np.array([v]) for q, v in at.items()}, 1)
+        return float(p["packing"][0]), int(p["packing_dof"])
 
     def correct_at(self, values: Mapping[str, float], faithful: FaithfulRVE, *,
                    k_model: float | None = None,

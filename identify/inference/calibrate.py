@@ -334,29 +334,96 @@ def _grid(prior: tuple[float, float], n: int) -> np.ndarray:
     return np.linspace(math.log10(prior[0]), math.log10(prior[1]), n)
 
 
+#: Gauss-Hermite nodes of the shared correction term's marginalisation (per system, centred
+#: and scaled on the term's Gaussian conditional posterior, so that a term the data pin
+#: down to a fraction of its prior width is integrated as accurately as a loose one).
+SHARED_NODES = 9
+
+
 def _stage_loglike(models: Mapping[str, ForwardModel], stage: Stage, meas: Measurements,
                    columns: dict[str, np.ndarray], scatter: float,
                    model_form_sd: float = 0.0) -> np.ndarray:
-    total = 0.0
+    """The stage's log likelihood per row of ``columns``: independent Student t terms per
+    formulation, except that the formulations of one shipped system share its correction
+    term ``delta ~ N(0, 1)`` (each moved by ``shared_sd * delta``), integrated out once per
+    system (:func:`_shared_marginal`)."""
+    groups: dict[str | None, list[str]] = {}
     for f in stage.formulations:
-        k, err = models[f].predict(columns)
-        se = meas.standard_error(f)
-        v = variance(se, k, err, scatter, models[f].model_sd, model_form_sd)
-        total = total + log_likelihood(meas.mean(f) - k, v, se ** 2, meas.values[f].size)
+        groups.setdefault(models[f].shared_system, []).append(f)
+    total = 0.0
+    for system, forms in groups.items():
+        if system is None:
+            for f in forms:
+                k, err = models[f].predict(columns)
+                total = total + _one_loglike(models[f], meas, f, k, err, scatter,
+                                             model_form_sd)
+        else:
+            total = total + _shared_marginal(models, forms, meas, columns, scatter,
+                                             model_form_sd)
     return total
 
 
+def _shared_marginal(models: Mapping[str, ForwardModel], forms: Sequence[str],
+                     meas: Measurements, columns: dict[str, np.ndarray], scatter: float,
+                     model_form_sd: float) -> np.ndarray:
+    """``log int prod_f t_f(m_f | k_f (1 + u_f delta)) phi(delta) d delta`` per row: Gauss-
+    Hermite nodes placed on the Gaussian approximation of delta's conditional posterior
+    (precision ``P = 1 + sum (u_f k_f)^2 / v_f``, mean ``sum u_f k_f r_f / v_f / P``) and
+    weighted by ``phi / q`` (importance form, exact for the Gaussian limit)."""
+    pred = {f: models[f].predict(columns) for f in forms}
+    u = {f: models[f].shared_sd(columns) for f in forms}
+    prec, lin = 1.0, 0.0
+    for f in forms:
+        k, err = pred[f]
+        v = variance(meas.standard_error(f), k, err, scatter, models[f].model_sd,
+                     model_form_sd)
+        a = u[f] * k
+        prec = prec + a ** 2 / v
+        lin = lin + a * (meas.mean(f) - k) / v
+    mu, sd = lin / prec, 1 / np.sqrt(prec)
+    nodes, weights = np.polynomial.hermite_e.hermegauss(SHARED_NODES)
+    terms = []
+    for z, w in zip(nodes, weights):
+        delta = mu + sd * z
+        ll = math.log(w / math.sqrt(2 * math.pi)) - 0.5 * delta ** 2 + np.log(sd) \
+            + 0.5 * z ** 2   # log(w) + log phi(delta) - log q(delta), q = N(mu, sd^2)
+        for f in forms:
+            k, err = pred[f]
+            ll = ll + _one_loglike(models[f], meas, f, k * (1 + u[f] * delta), err, scatter,
+                                   model_form_sd)
+        terms.append(ll)
+    stack = np.stack(np.broadcast_arrays(*terms))
+    top = stack.max(axis=0)
+    return top + np.log(np.exp(stack - top).sum(axis=0))
+
+
+def _one_loglike(model: ForwardModel, meas: Measurements, f: str, k: np.ndarray,
+                 err: np.ndarray, scatter: float, model_form_sd: float) -> np.ndarray:
+    """One formulation's Student t term at the model's ``k`` (W/(m K)); the shipped
+    correction's packing term counts as estimated with its pooled degrees of freedom."""
+    se = meas.standard_error(f)
+    v = variance(se, k, err, scatter, model.model_sd, model_form_sd)
+    pack = model.packing_dof
+    extra = None if pack is None else ((pack[0] * k) ** 2, pack[1])
+    return log_likelihood(meas.mean(f) - k, v, se ** 2, meas.values[f].size, estimated=extra)
+
+
 def log_likelihood(residual: np.ndarray, v: np.ndarray, v_measured: float,
-                   n: int) -> np.ndarray:
+                   n: int, *, estimated: tuple[np.ndarray, int] | None = None) -> np.ndarray:
     """Log density of ``residual`` (W/(m K)) under a Student t of scale ``sqrt(v)`` whose
     degrees of freedom follow from ``v_measured`` (the squared standard error, estimated
     from ``n`` replicates, ``n - 1`` degrees of freedom) and the rest of ``v`` (taken as
     known) by Welch-Satterthwaite: ``nu = v^2 / (v_measured^2 / (n - 1))``. With the
     replicate variance estimated from four samples, a Gaussian would take a sample variance
     that came out small at face value and weigh that formulation too much; the t keeps the
-    uncertainty of the estimate (for ``nu -> inf`` it is the Gaussian)."""
+    uncertainty of the estimate (for ``nu -> inf`` it is the Gaussian). ``estimated``: one
+    more part of ``v`` that is an estimate, (its variance, its degrees of freedom), e.g. the
+    shipped correction's pooled packing variance; it joins the sum's denominator."""
     v = np.asarray(v, dtype=np.float64)
-    nu = np.minimum(v ** 2 * (n - 1) / max(v_measured ** 2, 1e-300), 1e6)
+    denom = v_measured ** 2 / (n - 1)
+    if estimated is not None:
+        denom = denom + np.asarray(estimated[0]) ** 2 / max(estimated[1], 1)
+    nu = np.minimum(v ** 2 / np.maximum(denom, 1e-300), 1e6)
     z2 = residual ** 2 / v
     return (gammaln((nu + 1) / 2) - gammaln(nu / 2) - 0.5 * np.log(nu * math.pi * v)
             - 0.5 * (nu + 1) * np.log1p(z2 / nu))
@@ -377,14 +444,17 @@ def residuals(models: Mapping[str, ForwardModel], measurements: Measurements,
               values: Mapping[str, float], model_form_sd: float = 0.0
               ) -> dict[str, tuple[float, float, float]]:
     """Per formulation at the parameter ``values`` (m^2 K/W): measured mean, model k_iso and
-    likelihood variance (:func:`variance`), W/(m K) and (W/(m K))^2."""
+    its marginal likelihood variance (:func:`variance`, plus the shipped correction's term
+    shared by the system, :meth:`ForwardModel.shared_sd`), W/(m K) and (W/(m K))^2."""
     out = {}
     for stage in stages_of(models):
         s = pooled_scatter([models[f] for f in stage.formulations])
         for f in stage.formulations:
             m = models[f]
-            k, err = m.predict({p: np.array([values[p]]) for p in m.parameters})
+            cols = {p: np.array([values[p]]) for p in m.parameters}
+            k, err = m.predict(cols)
             v = variance(measurements.standard_error(f), k, err, s, m.model_sd, model_form_sd)
+            v = v + (m.shared_sd(cols) * k) ** 2
             out[f] = (measurements.mean(f), float(k[0]), float(v[0]))
     return out
 

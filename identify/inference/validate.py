@@ -68,7 +68,8 @@ def posterior_prediction(model: ForwardModel, posterior: Posterior, *,
                          seed: int = 0) -> tuple[float, float, float]:
     """(median, lo, hi) of the predicted measured mean over the posterior samples,
     W/(m K): the parameter spread, the model's RVE scatter and earlier-stage spread
-    (relative), its surrogate error bound and the measurement's ``standard_error``."""
+    (relative), the shipped correction's own and shared uncertainty, its surrogate error
+    bound and the measurement's ``standard_error``."""
     S = posterior.samples.shape[0]
     if model.parameters:
         cols = {p: 10 ** posterior.samples[:, posterior.names.index(p)]
@@ -77,7 +78,8 @@ def posterior_prediction(model: ForwardModel, posterior: Posterior, *,
     else:
         k, err = np.full(S, model.predict({})[0][0]), np.zeros(S)
     rng = np.random.default_rng(seed)
-    rel = math.hypot(model.rve_scatter, model.model_sd, posterior.model_form_sd)
+    rel = np.hypot(math.hypot(model.rve_scatter, model.model_sd, posterior.model_form_sd),
+                   model.shared_sd(cols) if model.parameters else 0.0)
     k = (k * (1 + rel * rng.standard_normal(S)) + err * rng.uniform(-1, 1, S)
          + standard_error * rng.standard_normal(S))
     a = (1 - level) / 2

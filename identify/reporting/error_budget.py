@@ -105,28 +105,35 @@ def _voxel_bias(voxel_um: float) -> tuple[float | None, str]:
 
 
 def _shipped_items(items: dict, m, best: Mapping[str, float]) -> float:
-    """The shipped correction's entries of a formulation's budget; returns its box, um."""
+    """The shipped correction's entries of a formulation's budget; returns the converged box
+    it corrects to, um."""
     fit = m.shipped.fit
     cols = {p: np.array([best[p]]) for p in m.parameters}
-    c, u = m.shipped.factor(cols, 1)
-    parts = (f"packings +-{100 * fit['packing_sd']:.1f} %, interpolation +-"
-             f"{100 * fit['fit_rms']:.1f} %, voxel extrapolation (bias order) +-"
-             f"{100 * fit['order_sd']:.1f} %")
-    extra = math.sqrt(max(float(u[0]) ** 2 - fit["packing_sd"] ** 2 - fit["fit_rms"] ** 2
-                          - fit["order_sd"] ** 2, 0.0))
-    if extra > 1e-4:
-        parts += f", beyond the design's resistances +-{100 * extra:.1f} %"
+    parts = m.shipped.parts(cols, 1)
+    sh = fit["shared"]
+    box = sh["box"]
     items["faithful correction (applied)"] = {
-        "value": float(c[0]) - 1, "in_likelihood": False,
-        "basis": f"shipped ({m.shipped.system}): {fit['box_um']:g} um box, voxel bias "
-                 "extrapolated from two voxels, corrections.json"}
-    if "voxel_bias" in fit:
-        items["of it: voxel bias removed (applied)"] = {
-            "value": -fit["voxel_bias"], "in_likelihood": False,
-            "basis": "mean of the shipped points' fine-voxel bias"}
-    items["correction uncertainty"] = {"value": float(u[0]), "in_likelihood": True,
-                                       "basis": parts}
-    return float(fit["box_um"])
+        "value": float(parts["c"][0]) - 1, "in_likelihood": False,
+        "basis": f"shipped ({m.shipped.system}): {fit['box_um']:g} um table box at "
+                 f"{fit['voxel_um']:g} um, to the converged {box['converged_um']:g} um box and "
+                 "no voxel bias, corrections.json"}
+    items["of it: box step (applied)"] = {
+        "value": box["factor"] - 1, "in_likelihood": False,
+        "basis": f"box study, {box['table_box_um']:g} -> {box['converged_um']:g} um and larger"}
+    items["of it: voxel bias removed (applied)"] = {
+        "value": -fit["voxel_bias"], "in_likelihood": False,
+        "basis": "the order study's bias at the table voxel, mean over the design"}
+    items["correction uncertainty"] = {
+        "value": float(math.hypot(parts["packing"][0], parts["interpolation"][0])),
+        "in_likelihood": True,
+        "basis": f"packings +-{100 * parts['packing'][0]:.1f} % ({parts['packing_dof']} dof, "
+                 f"pooled), interpolation +-{100 * parts['interpolation'][0]:.1f} %"}
+    items["correction uncertainty, shared"] = {
+        "value": float(parts["shared"][0]), "in_likelihood": True,
+        "basis": f"box step +-{100 * box['sd']:.1f} %, tail cut +-"
+                 f"{100 * sh['tail']['sd']:.1f} %, voxel bias (its order's interval): one term "
+                 "for every formulation of the system"}
+    return float(box["converged_um"])
 
 
 def _slope(model, best: Mapping[str, float], p: str) -> float:
@@ -183,7 +190,11 @@ def error_budget(ident: Identification) -> dict:
                     "value": None if bias is None else -bias, "in_likelihood": False,
                     "basis": basis}
                 box = s.box_um
-            eff, basis = _box_effect(system, box)
+            if corr is None and m.shipped is not None:
+                eff, basis = 0.0, (f"corrected to the converged {box:g} um box; what the box "
+                                   "study resolves of the step is in the shared term")
+            else:
+                eff, basis = _box_effect(system, box)
             items["box effect beyond the box solved"] = {"value": eff, "in_likelihood": False,
                                                          "basis": basis}
             for name, q in (("film 2 nm", "film_2nm"), ("film 5 nm", "film_5nm"),
@@ -192,6 +203,7 @@ def error_budget(ident: Identification) -> dict:
                 items[name] = {"value": v, "in_likelihood": False, "basis": basis}
             numerical = [items[n]["value"] for n in ("RVE scatter", "surrogate error",
                                                      "correction uncertainty",
+                                                     "correction uncertainty, shared",
                                                      "voxel bias (not corrected)",
                                                      "box effect beyond the box solved")
                          if n in items and items[n]["value"] is not None]
@@ -213,7 +225,7 @@ def error_budget(ident: Identification) -> dict:
                 continue
             delta = float(np.mean(vals))
             if name in ("measurement noise", "RVE scatter", "surrogate error",
-                        "correction uncertainty"):
+                        "correction uncertainty", "correction uncertainty, shared"):
                 delta = -abs(delta)  # a standard deviation: shown as the factor of +1 sd
             factors[name] = math.exp(-delta / slope)
         params[p] = {"formulations": using, "dlnk_dlnR": slope,

@@ -298,11 +298,15 @@ def fidelity_note(settings, parameters: Mapping[str, object] | None = None,
                 + " For values to quote, run again at the default `--fidelity shipped` (the "
                 "corrections shipped with the package, same cost) or `--fidelity standard`.")
     if s.faithful.shipped:
-        from ..forward.shipped import STALE_CONTACTS_SD, ShippedCorrections
+        from ..forward.shipped import ShippedCorrections
 
-        prov = ShippedCorrections.load().provenance
-        boxes = ", ".join(f"{f} {b:g} um" for f, b in prov["boxes_um"].items())
-        voxels = " and ".join(f"{v:g}" for v in prov["voxels_um"])
+        table = ShippedCorrections.load()
+        prov = table.provenance
+        boxes = ", ".join(f"{n} {b:g} um -> {s_['shared']['box']['converged_um']:g} um"
+                          for n, s_ in table.systems.items())
+        voxels = ", ".join(f"{n} {min(s_['shared']['voxel']['voxels_um']):g}-"
+                           f"{max(s_['shared']['voxel']['voxels_um']):g} um"
+                           for n, s_ in table.systems.items())
         ran = level_record(gap) if gap is not None else None
         models = dict(ran["models"]) if ran else {}
         runtime = [f for f, r in models.items() if r["source"] == "runtime"]
@@ -317,18 +321,13 @@ def fidelity_note(settings, parameters: Mapping[str, object] | None = None,
         else:
             rest = ("; every gap model took its shipped factor: no faithful solve ran in "
                     "this run.")
-        table = ShippedCorrections.load()
-        stale = (" These corrections were built before touching particles met at the stated "
-                 "film (their solves read the packer's clearance as a film, more of it in "
-                 "the converged boxes than in the cheap RVE): each factor carries "
-                 f"{100 * STALE_CONTACTS_SD:g} % more relative uncertainty for it until they "
-                 "are rebuilt (`itr corrections build examples/corrections.toml`)."
-                 if table.stale_contacts else "")
         return (f"Fidelity `{name}` (the default): the gap parametrisation's level is "
-                f"corrected by the corrections shipped with the package (converged boxes: "
-                f"{boxes}; voxel bias extrapolated from {voxels} um; {prov['packings']} "
-                f"packings; {prov['date']}, `itr corrections show`), their uncertainty in "
-                "the intervals" + rest + stale + star + area)
+                f"corrected by the corrections shipped with the package (touching particles "
+                f"at the {prov['contacts']}; table box to converged box: {boxes}; voxel "
+                f"bias from the same particles at {voxels}; {prov['packings']} packings; "
+                f"{prov['date']}, `itr corrections show`), their uncertainty in the "
+                "intervals, the box, voxel and tail terms shared by each system's "
+                "formulations" + rest + star + area)
     boxes = ", ".join(f"{f} {b:g} um" for f, b in s.faithful.boxes_um)
     return (f"Fidelity `{name}`: the gap parametrisation's level is corrected on faithful "
             f"RVEs (boxes {boxes}; voxel bias removed by Richardson over "
