@@ -13,9 +13,16 @@ A corrections file (``examples/corrections.toml``) names per filler system
   * ``[system.boxes]``: one formulation at several boxes (the table's voxel), many
     packings per box: the step from the table box to the converged one;
   * ``[system.order]``: one formulation at several voxels of the same particles (the
-    table voxel's fine-tail cut): the voxel bias of the table voxel and its order;
+    table voxel's fine-tail cut): the voxel bias of the table voxel and its order (where
+    a system states none, its middle formulation at the table box and voxel and two finer
+    voxels, 2 packings);
   * ``[system.tail]``: one formulation at the table box with the size distribution's tails
     cut at other number quantiles: what the tail cut leaves out.
+
+  A system without a box study takes its table box as converged (the powders' rule,
+  :func:`itr_fv.rve.from_powders.faithful_box`) with the rule's uncertainty; one without a
+  tail study adds none for the tail. Where a system states no ``box_um`` or ``voxel_um``,
+  those of its powders are used.
 
 Each becomes one campaign of the campaign engine per box, voxel or quantile
 (:mod:`itr_surrogate.campaign`), and one more campaign per system holds the cheap RVE whose
@@ -79,6 +86,7 @@ from itr_fv.checks import unknown_key
 from itr_fv.io import read_toml
 from itr_fv.materials import default_system
 from itr_fv.materials.material_system import MaterialSystem
+from itr_fv.rve.from_powders import faithful_box, voxel_for
 from itr_fv.rve.spec import RVESpec
 from itr_fv.solvers.choice import check_solver
 from itr_surrogate.campaign import Campaign
@@ -206,24 +214,47 @@ class CorrectionSystem:
         return sorted(self.design["points"][0])
 
 
-def _system(i: int, s: dict[str, Any], plan: str) -> CorrectionSystem:
+def _system(i: int, s: dict[str, Any], plan: str,
+            material: MaterialSystem) -> CorrectionSystem:
+    """One checked ``[[system]]``. Where it states no voxel or box, those of the material
+    system's powders (:mod:`itr_fv.rve.from_powders`: the cheap voxel; the smallest box whose
+    size cut removes at most 1.5 % of any of its fillers' volume); where it states no order
+    study, one is made (:func:`_default_order`)."""
     unknown = unknown_key(s, _SYSTEM | {"values", "points"} | set(STUDY_KINDS))
     if unknown:
         raise ValueError(f"system {i}: {unknown}")
-    missing = sorted(_SYSTEM - set(s))
+    missing = sorted({"name", "formulations"} - set(s))
     if missing:
         raise ValueError(f"system {i}: missing key {missing[0]!r}")
     name = str(s["name"])
-    box, voxel = float(s["box_um"]), float(s["voxel_um"])
     try:
-        studies = {k: Study.from_dict(k, s[k], system=name, plan=plan, box_um=box,
-                                      voxel_um=voxel)
-                   for k in STUDY_KINDS if k in s}
+        fillers = [material.filler(f) for f in name.split("-")]
+        voxel = float(s.get("voxel_um", voxel_for(f.psd for f in fillers)))
+        box = float(s["box_um"]) if "box_um" in s else max(
+            faithful_box(f.psd, voxel) for f in fillers)
+        forms = tuple(str(f) for f in s["formulations"])
         design = _design(s, "design")
+        given = {k: s[k] for k in STUDY_KINDS if k in s}
+        given.setdefault("order", _default_order(forms, box, voxel, design))
+        studies = {k: Study.from_dict(k, given[k], system=name, plan=plan, box_um=box,
+                                      voxel_um=voxel)
+                   for k in STUDY_KINDS if k in given}
     except ValueError as exc:
         raise ValueError(f"system {name!r}: {exc}") from None
-    return CorrectionSystem(name, box, voxel, tuple(str(f) for f in s["formulations"]),
-                            design, studies)
+    return CorrectionSystem(name, box, voxel, forms, design, studies)
+
+
+def _default_order(formulations: tuple[str, ...], box_um: float, voxel_um: float,
+                   design: dict[str, Any]) -> dict[str, Any]:
+    """The order study of a system that states none: its middle formulation at the table
+    box, the table voxel and two finer ones of the same box (``n``, ``1.25 n`` and ``1.5 n``
+    voxels per edge), 2 packings, the table's design."""
+    n = round(box_um / voxel_um)
+    voxels = [voxel_um] + [box_um / m for m in (round(1.25 * n), round(1.5 * n))]
+    return {"formulation": formulations[len(formulations) // 2], "box_um": box_um,
+            "voxels_um": voxels, "packings": 2, "seed": 401,
+            **({"values": design["values"]} if design["kind"] == "grid"
+               else {"points": design["points"]})}
 
 
 @dataclass(frozen=True)
@@ -260,7 +291,8 @@ class CorrectionPlan:
             raise ValueError(unknown)
         name = str(data.get("name", "corrections"))
         packings = _whole(data.get("packings", 3), 2, "packings")
-        systems = tuple(_system(i, s, name) for i, s in enumerate(data.get("system", [])))
+        systems = tuple(_system(i, s, name, material)
+                        for i, s in enumerate(data.get("system", [])))
         if not systems:
             raise ValueError("system: give at least one [[system]]")
         tol = data.get("tol", 1e-6)

@@ -19,7 +19,7 @@ from ..inference.pipeline import Identification
 __all__ = ["level_record", "level_lines", "runs_record"]
 
 #: Provenance entries of the shipped table that say what its corrections are.
-_SHIPPED_KEYS = ("plan", "date", "commit", "boxes_um", "voxels_per_system_um", "packings",
+_SHIPPED_KEYS = ("plan", "date", "commit", "contacts", "boxes_um", "voxels_um", "packings",
                  "seeds", "tol", "solver")
 
 
@@ -78,16 +78,17 @@ def level_lines(ident: Identification) -> list[str]:
     if "shipped" in by:
         sh = rec["shipped"]
         boxes = ", ".join(f"{k} {v:g} um" for k, v in sh.get("boxes_um", {}).items())
-        voxels = "; ".join(f"{k} {' and '.join(f'{v:g}' for v in vs)} um"
-                           for k, vs in sh.get("voxels_per_system_um", {}).items())
+        voxels = ", ".join(f"{k} {v:g} um" for k, v in sh.get("voxels_um", {}).items())
         factors = _factors(rec, by["shipped"])
         lines.append(
             f"- shipped corrections ({len(by['shipped'])} models, {sh['file']}; plan "
-            f"{sh.get('plan')}, {sh.get('date')}, commit {str(sh.get('commit'))[:10]}): k of "
-            f"converged boxes ({boxes}; voxels {voxels}, the voxel bias extrapolated where "
-            f"two are given; {sh.get('packings')} packings, seeds {sh.get('seeds')}) over k "
-            f"of {cheap}, computed once and read here: no solve of this run made them. "
-            f"Factors at the best values: {factors}.")
+            f"{sh.get('plan')}, {sh.get('date')}, commit {str(sh.get('commit'))[:10]}; "
+            f"touching particles at the {sh.get('contacts')}): k of each system's table box "
+            f"({boxes}; voxels {voxels}; {sh.get('packings')} packings, seeds "
+            f"{sh.get('seeds')}) taken to the converged box of its box study and to no voxel "
+            f"bias by its order study, over k of {cheap}, computed once and read here: no "
+            f"solve of this run made them. Factors at the best values (own sd): {factors}; "
+            "each system's box, voxel and tail terms shared by its formulations.")
     if "runtime" in by:
         rt = rec["runtime"]
         boxes = ", ".join(f"{f} {b:g} um" for f, b in rt["boxes_um"].items())
