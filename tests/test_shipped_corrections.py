@@ -494,3 +494,21 @@ def test_itr_corrections_show_of_no_corrections_table_is_one_line_naming_the_fil
     if content is not None and name != "hello.txt":
         with pytest.raises(ValueError, match=r"^data: not a corrections table \("):
             ShippedCorrections(json.loads(content))
+
+
+def test_a_lab_plan_without_studies_takes_its_powders_box_voxel_and_an_order_study():
+    from itr_fv.materials.system_file import read_system
+    from itr_fv.rve.from_powders import box_volume_cut
+
+    zno = read_system(ROOT / "examples" / "zno_epoxy" / "system.toml")
+    plan = CorrectionPlan.from_toml(ROOT / "examples" / "zno_epoxy" / "corrections.toml", zno)
+    s = plan.system("ZnO")
+    assert s.voxel_um == 0.16 and box_volume_cut(zno.filler("ZnO").psd, s.box_um) <= 0.015
+    order = s.studies["order"]
+    assert set(s.studies) == {"order"} and order.formulation == "ZnO-45"
+    n = round(s.box_um / s.voxel_um)
+    assert [round(s.box_um / v) for v in order.voxels_um] == [n, round(1.25 * n),
+                                                              round(1.5 * n)]
+    # every order campaign packs the table voxel's particles
+    camps = plan.study_campaigns("ZnO", "order")
+    assert [c.rve.cut_voxel_um for c in camps] == [None, 0.16, 0.16]
