@@ -138,8 +138,9 @@ def studies_md(data: dict) -> list[str]:
             vals = ", ".join(f"{v:.0e}" for v in q["values"].values())
             lo, hi = q["order_interval"]
             blo, bhi = q["bias_interval"]
+            end = "" if q["order_bounded"] else ", at an end of the range fitted, 1-8"
             lines.append(f"| {vals} | {len(q['packings'])} | {q['order']:.2f} ({lo:.2f}-"
-                         f"{hi:.2f}{'' if q['order_bounded'] else ', at the scan end'}) | "
+                         f"{hi:.2f}{end}) | "
                          f"{100 * q['bias']:+.2f} % ({100 * blo:+.2f} to {100 * bhi:+.2f} %) | "
                          f"{100 * q['rms']:.3f} % | {q['dof']} |")
         tail = sh["tail"]

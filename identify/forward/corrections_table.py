@@ -15,9 +15,10 @@ bias is, per formulation ``i`` and design point ``R``,
 - ``b(R)`` (:func:`voxel_order`): the table voxel's relative bias against no voxel, from the
   order study (the same particles at three voxels or more): per design point the law
   ``k_jh = a_j (1 + beta h^p)`` (a level per packing, one relative slope and one order),
-  fitted by least squares over the relative residuals, its 90 % interval by the profile of
-  the order (the F test of nonlinear regression: ``RSS(p) <= RSS_min (1 + F_0.9(1, dof) /
-  dof)``); between design points linear in log10 R (a hybrid: the mean log10 of its two);
+  fitted by least squares over the relative residuals with the order in
+  :data:`ORDER_RANGE`, its 90 % interval by the profile of the order (the F test of
+  nonlinear regression: ``RSS(p) <= RSS_min (1 + F_0.9(1, dof) / dof)``); between design
+  points linear in log10 R (a hybrid: the mean log10 of its two);
 - the tail cut (:func:`tail_cut`): the finest quantile's level against the table's cut at
   the same box, not applied (it is not resolved by a few packings) but its change and its
   standard error in quadrature as an uncertainty.
@@ -69,6 +70,12 @@ TABLE_FORMAT = 2
 #: AlN-60 at that rule's 80 um, the next step (80 -> 96 um) was -0.07 %, 90 % interval
 #: -0.77 to +0.64 % (validation/results/box_study.md), about 0.4 % sd.
 BOX_RULE_SD = 0.004
+#: The orders the voxel law is fitted over: at least first order (the staircase of a
+#: sphere's surface misplaces its area by O(h), the gap model's least order), at most 8 (a
+#: bias that vanishes within the finest voxel). Below 1 a power law cannot tell its term
+#: from a level (h^p about constant over the voxels), and a non-monotone increment of one
+#: packing (AlN-60 at 5e-9) then reads as an unbounded extrapolation.
+ORDER_RANGE = (1.0, 8.0)
 #: Confidence of the intervals the studies report.
 LEVEL = 0.90
 _Z = stats.norm.ppf(0.5 + LEVEL / 2)
@@ -156,7 +163,7 @@ def _order_fit(h: np.ndarray, k: np.ndarray, p: float) -> tuple[float, float, np
 
 def _one_order(h: np.ndarray, k: np.ndarray, h0: float) -> dict[str, Any]:
     """The order, the bias at ``h0`` and their 90 % intervals from packings x voxels ``k``."""
-    ps = np.exp(np.linspace(math.log(0.2), math.log(12.0), 241))
+    ps = np.exp(np.linspace(math.log(ORDER_RANGE[0]), math.log(ORDER_RANGE[1]), 241))
     fits = [_order_fit(h, k, p) for p in ps]
     rss = np.array([f[0] for f in fits])
     bias = np.array([f[1] * h0 ** p for f, p in zip(fits, ps)])

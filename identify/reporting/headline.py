@@ -302,8 +302,8 @@ def fidelity_note(settings, parameters: Mapping[str, object] | None = None,
 
         table = ShippedCorrections.load()
         prov = table.provenance
-        boxes = ", ".join(f"{n} {b:g} um -> {s_['shared']['box']['converged_um']:g} um"
-                          for n, s_ in table.systems.items())
+        boxes = ", ".join(f"{n} {s_['box_um']:g} um -> {s_['shared']['box']['converged_um']:g}"
+                          " um" for n, s_ in table.systems.items())
         voxels = ", ".join(f"{n} {min(s_['shared']['voxel']['voxels_um']):g}-"
                            f"{max(s_['shared']['voxel']['voxels_um']):g} um"
                            for n, s_ in table.systems.items())

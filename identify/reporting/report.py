@@ -15,8 +15,8 @@ from itr_fv.solvers.choice import solver_choice
 from ..inference.measurements import Measurements
 from ..inference.pipeline import Identification
 from .error_budget import error_budget, error_budget_lines
-from .level import level_lines, level_record
 from .headline import BIC_MARGIN, parametrisation_choice, prior_ends
+from .level import level_lines, level_record
 
 __all__ = ["identified_dict", "selection", "table3_lines", "table5_lines", "fidelity_statement",
            "table6_lines", "surrogate_lines",

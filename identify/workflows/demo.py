@@ -178,8 +178,8 @@ def run_demo(settings: DemoSettings, out: Path, echo=print) -> list[Path]:
     """
     from itr_fv import Materials
     from itr_fv.io import write_text
-    from itr_fv.rve import build_rve
     from itr_fv.run_folder import begin_run, write_manifest
+    from itr_fv.rve import build_rve
     from itr_fv.solvers.choice import solver_backend
     from itr_fv.solvers.driver import homogenize
 
