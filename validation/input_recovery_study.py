@@ -83,7 +83,7 @@ def truths() -> dict[str, dict]:
     from shipped_recovery_study import truth_k
 
     from itr_fv.materials.formulation_names import fractions_of
-    from itr_identify.forward.shipped import campaign_rows
+    from itr_identify.forward.corrections_table import campaign_rows
 
     out: dict[str, dict] = {}
     old = {f: t["k_truth"] for f, t in truth_k().items() if len(fractions_of(f)) == 1}

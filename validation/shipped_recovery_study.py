@@ -46,8 +46,8 @@ def truth_k() -> dict[str, dict]:
     """Per formulation: k_iso per packing at both voxels, extrapolated, and the mean."""
     from recovery_truth import SYSTEMS, VOXELS_UM, folder
 
+    from itr_identify.forward.corrections_table import campaign_rows
     from itr_identify.forward.fidelity import BIAS_ORDER, richardson
-    from itr_identify.forward.shipped import campaign_rows
 
     coarse_v, fine_v = VOXELS_UM
     out = {}

@@ -44,6 +44,7 @@ the table does not hold. A formulation the table holds takes its own points (a q
 from __future__ import annotations
 
 import datetime as _dt
+import json
 import math
 import subprocess
 from collections.abc import Mapping, Sequence
@@ -58,8 +59,8 @@ from itr_fv.rve.contact_film import CONTACT_GEOMETRY
 from .correction_plan import CorrectionPlan
 from .fidelity import CHEAP_REPLICAS, CHEAP_TOL
 
-__all__ = ["assemble", "plan_rows", "box_step", "voxel_order", "tail_cut", "table_points",
-           "fit_system", "design_columns", "BOX_CRITERION", "TABLE_FORMAT"]
+__all__ = ["assemble", "campaign_rows", "plan_rows", "box_step", "voxel_order", "tail_cut",
+           "table_points", "fit_system", "design_columns", "BOX_CRITERION", "TABLE_FORMAT"]
 
 #: A box is converged when its mean k_iso lies within this of every larger box's.
 BOX_CRITERION = 0.005
@@ -81,12 +82,22 @@ LEVEL = 0.90
 _Z = stats.norm.ppf(0.5 + LEVEL / 2)
 
 
+def campaign_rows(folder: Path) -> list[dict]:
+    """A campaign store's rows, or where there is none the rows of ``<folder>.rows.json``
+    (rows kept without their store, e.g. read back from a device run's log)."""
+    from itr_surrogate.store import CampaignStore
+
+    if (folder / "campaign.json").is_file():
+        store = CampaignStore(folder)
+        return store.results().to_pylist() if store.done_tasks() else []
+    loose = folder.with_name(folder.name + ".rows.json")
+    return json.loads(loose.read_text()) if loose.is_file() else []
+
+
 def plan_rows(roots: Sequence[str | Path], name: str) -> list[dict]:
     """The rows of campaign ``name`` from every run folder in ``roots`` (its store
     ``ROOT/<name>``); a (task, parameter set) solved in two folders counts once (the
     first)."""
-    from .shipped import campaign_rows
-
     out, seen = [], set()
     for root in roots:
         for r in campaign_rows(Path(root) / name):

@@ -39,24 +39,12 @@ from itr_fv.rve.spec import RVESpec
 
 from .corrections_table import TABLE_FORMAT
 
-__all__ = ["ShippedCorrections", "ShippedFactor", "campaign_rows", "SHIPPED_FILE"]
+__all__ = ["ShippedCorrections", "ShippedFactor", "SHIPPED_FILE"]
 
 SHIPPED_FILE = "corrections.json"
 #: How far a hybrid may be from 1:1 (difference of the two fractions) and still use the 1:1
 #: fit, volume fraction.
 HYBRID_TOLERANCE = 0.005
-
-
-def campaign_rows(folder: Path) -> list[dict]:
-    """A campaign store's rows, or where there is none the rows of ``<folder>.rows.json``
-    (rows kept without their store, e.g. read back from a device run's log)."""
-    from itr_surrogate.store import CampaignStore
-
-    if (folder / "campaign.json").is_file():
-        store = CampaignStore(folder)
-        return store.results().to_pylist() if store.done_tasks() else []
-    loose = folder.with_name(folder.name + ".rows.json")
-    return json.loads(loose.read_text()) if loose.is_file() else []
 
 
 def _solve_key(system: Mapping[str, Any]) -> tuple:
