@@ -51,7 +51,7 @@ def test_a_corrections_table_holds_for_the_system_it_was_built_for():
     zno = read_system(ZNO)
     shipped = ShippedCorrections.load()
     assert shipped.why_not_for(default_system(), CHEAP_RVE) == ""
-    assert "hold for the paper's system" in shipped.why_not_for(zno, cheap_rve(
+    assert "built for the material system 'paper'" in shipped.why_not_for(zno, cheap_rve(
         [zno.filler("ZnO").psd]))
     own = ShippedCorrections({**shipped.data, "provenance": {
         **shipped.provenance, "material_system": zno.to_dict(),

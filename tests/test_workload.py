@@ -39,7 +39,6 @@ values = { R_Al2O3_silicone = [1e-8] }
 """
 
 CORRECTIONS_HUGE = """name = "huge"
-voxels_um = [0.25, 0.05]
 packings = 2
 seed = 9001
 solver = "fft"
@@ -47,6 +46,7 @@ tol = 1e-6
 [[system]]
 name = "Al2O3"
 box_um = 200.0
+voxel_um = 0.05
 formulations = ["Al2O3-60"]
 values = { R_Al2O3_silicone = [1e-8] }
 """

@@ -53,9 +53,12 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "validation"))
 RESULTS = ROOT / "validation" / "results"
-RUNS = RESULTS / "input_recovery_runs"
-OUT = RESULTS / "input_recovery.md"
-OUT_JSON = RESULTS / "input_recovery.json"
+RUNS = RESULTS / "input_recovery_joint_runs"
+OUT = RESULTS / "input_recovery_joint.md"
+OUT_JSON = RESULTS / "input_recovery_joint.json"
+#: Issue 59's acceptance 2, fixed before the run: covered (at least 8 of 10 seeds, no miss
+#: flagged determined) and the geometric mean of best / truth within these.
+BEST_RANGE = (0.8, 1.25)
 REPLICATES = 4
 SCALE = 1.08
 
@@ -141,7 +144,7 @@ def run(n_seeds: int, which: list[str] | None) -> None:
             t = time.perf_counter()
             ident = identify(meas, "gap", settings=settings.forward,
                              grid_points=settings.grid_points, seed=seed, reuse=models,
-                             echo=lambda line: None)
+                             echo=lambda line: None, floor_check=False)
             models.update(ident.models)
             row = {"truth": name, "seed": seed, "seconds": time.perf_counter() - t,
                    "fit": {k: ident.fit.get(k) for k in ("chi2", "dof", "p", "misfit",
@@ -191,8 +194,10 @@ def summary() -> dict:
                       "missed_flagged_determined": wrong,
                       "flags": sorted({x["flag"] for x in d}),
                       "best_geomean": math.exp(float(np.mean([math.log(x["best"]) for x in d]))),
-                      # no miss flagged determined (the coverage is reported beside)
-                      "passes": wrong == 0,
+                      # issue 59: covered, no miss flagged determined, the point unbiased
+                      "passes": (wrong == 0 and covered >= 0.8 * len(d) and BEST_RANGE[0]
+                                 <= math.exp(float(np.mean([math.log(x["best"] / true)
+                                                            for x in d]))) <= BEST_RANGE[1]),
                       "rows": [{"seed": r["seed"], **r["parameters"][p],
                                 "chi2": r["fit"]["chi2"], "dof": r["fit"]["dof"]} for r in got]}
         out[name] = {"what": truth["what"], "k": truth["k"], "parameters": per}
@@ -201,7 +206,7 @@ def summary() -> dict:
 
 def report() -> None:
     s = summary()
-    lines = ["# Recovery against truths that do not share the model (issue 47)", "",
+    lines = ["# Recovery against truths that do not share the model (issues 47, 59)", "",
              " ".join(__doc__.split("\n\n")[1].split()), "", "See the study's docstring "
              "(`validation/input_recovery_study.py`) for how each truth was built.", ""]
     lines += ["| truth | what | resistance | truth (m^2 K/W) | seeds | covered (marginal) | "
@@ -214,9 +219,12 @@ def report() -> None:
                          f"{d['missed_flagged_determined']} | {', '.join(d['flags'])} | "
                          f"{d['best_geomean']:.3g} ({d['best_geomean'] / d['truth']:.2f} x) | "
                          f"{'holds' if d['passes'] else 'MISSES'} |")
-    lines += ["", "Acceptance 2 holds for a truth where no seed has the truth outside a value "
-              "flagged determined and at least 8 of 10 seeds cover it (or every miss is "
-              "flagged otherwise).", ""]
+    lines += ["", "Acceptance 2 (issue 59, fixed before the run) holds for a truth where no "
+              "seed has the truth outside a value flagged determined, at least 8 of 10 seeds "
+              f"cover it and the geometric mean of best / truth lies within {BEST_RANGE[0]}-"
+              f"{BEST_RANGE[1]}. The identification is the joint posterior "
+              "(`itr_identify.inference.joint`); the best value is the posterior median of "
+              "ln R. The issue-47 run of the earlier machinery is `input_recovery.md`.", ""]
     for name, t in s.items():
         lines += [f"## {name}", "", t["what"] + ".", "",
                   "| formulation | truth k_iso (W/mK) |", "|---|---|"]

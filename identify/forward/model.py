@@ -128,7 +128,10 @@ class ForwardSettings:
         RVE replicas per formulation (seeds ``rve.seed + 0, 1, ...``); the reduced basis is
         fitted on the first, all enter the RVE scatter and the validation.
     prior_m2K_per_W : (float, float)
-        Range of every resistance (log-uniform prior, reduced-basis box), m^2 K/W.
+        Range of every resistance in the reduced bases' box and the grid calibration's
+        log-uniform prior, m^2 K/W: the joint posterior's resistance prior (1e-9 to 1e-6,
+        :mod:`itr_identify.inference.priors`) widened by a factor 2 each side, so that a
+        resistance scaled by the matrix conductivity stays inside it.
     rb_tol : float
         Relative bound gap at which the reduced basis stops adding full solves.
     rb_max_solves : int
@@ -155,7 +158,7 @@ class ForwardSettings:
 
     rve: RVESpec = RVESpec(box_um=16.0, voxel_um=0.25)
     replicas: int = 3
-    prior_m2K_per_W: tuple[float, float] = (1e-9, 1e-5)
+    prior_m2K_per_W: tuple[float, float] = (5e-10, 2e-6)
     rb_tol: float = 2e-3
     rb_max_solves: int = 30
     solver_tol: float = 1e-8

@@ -74,6 +74,13 @@ UNDETERMINED_DECADES = 2.0
 DETERMINATIONS = ("at the prior's edge", "undetermined", "bounded on one side", "determined")
 
 
+def _weighted_quantile(x: np.ndarray, q, w: np.ndarray) -> np.ndarray:
+    order = np.argsort(x)
+    ws = w[order]
+    c = (np.cumsum(ws) - 0.5 * ws) / ws.sum()
+    return np.interp(q, c, x[order])
+
+
 def credible_interval(log_samples: np.ndarray, best_log10: float | None = None,
                       level: float = 0.9) -> tuple[float, float]:
     """The ``level`` credible interval of 1-D log10 samples, in log10: the equal-tailed one,
@@ -237,15 +244,29 @@ class Posterior:
     stages: list[StageResult] = field(default_factory=list)
     model_form_sd: float = 0.0
     log_evidence: float = 0.0
+    weighted: tuple[np.ndarray, np.ndarray] | None = None
 
     def median(self, name: str) -> float:
+        if self.weighted is not None:
+            x, w = self.weighted
+            return float(10 ** _weighted_quantile(x[:, self.names.index(name)], 0.5, w))
         return float(10 ** np.median(self.samples[:, self.names.index(name)]))
 
     def interval(self, name: str, level: float = 0.9) -> tuple[float, float]:
         """Credible interval, m^2 K/W: equal-tailed, moved where needed to hold the best
-        value (:func:`credible_interval`), so ``lo <= best[name] <= hi`` always."""
-        x = self.samples[:, self.names.index(name)]
+        value (:func:`credible_interval`), so ``lo <= best[name] <= hi`` always; from the
+        weighted draws where the posterior has them (:attr:`weighted`: a joint posterior's
+        importance draws, log10 values and weights; :attr:`samples` are then draws by
+        weight, for what needs equal-weight draws)."""
         best = self.best.get(name)
+        if self.weighted is not None:
+            x, w = self.weighted
+            a = (1 - level) / 2
+            lo, hi = (float(v) for v in _weighted_quantile(x[:, self.names.index(name)],
+                                                           [a, 1 - a], w))
+            lo, hi = float(10 ** lo), float(10 ** hi)
+            return ((min(lo, best), max(hi, best)) if best is not None else (lo, hi))
+        x = self.samples[:, self.names.index(name)]
         lo, hi = credible_interval(x, None if best is None else math.log10(best), level)
         lo, hi = float(10 ** lo), float(10 ** hi)
         if best is not None:                 # exactly, past the round trip through log10
@@ -348,8 +369,8 @@ def _stage_loglike(models: Mapping[str, ForwardModel], stage: Stage, meas: Measu
     term ``delta ~ N(0, 1)`` (each moved by ``shared_sd * delta``), integrated out once per
     system (:func:`_shared_marginal`)."""
     groups: dict[str | None, list[str]] = {}
-    for f in stage.formulations:
-        groups.setdefault(models[f].shared_system, []).append(f)
+    for f in stage.formulations:   # a model without a shipped correction has no such term
+        groups.setdefault(getattr(models[f], "shared_system", None), []).append(f)
     total = 0.0
     for system, forms in groups.items():
         if system is None:
@@ -403,13 +424,14 @@ def _one_loglike(model: ForwardModel, meas: Measurements, f: str, k: np.ndarray,
     correction's packing term counts as estimated with its pooled degrees of freedom."""
     se = meas.standard_error(f)
     v = variance(se, k, err, scatter, model.model_sd, model_form_sd)
-    pack = model.packing_dof
+    pack = getattr(model, "packing_dof", None)
     extra = None if pack is None else ((pack[0] * k) ** 2, pack[1])
     return log_likelihood(meas.mean(f) - k, v, se ** 2, meas.values[f].size, estimated=extra)
 
 
-def log_likelihood(residual: np.ndarray, v: np.ndarray, v_measured: float,
-                   n: int, *, estimated: tuple[np.ndarray, int] | None = None) -> np.ndarray:
+def log_likelihood(residual: np.ndarray, v: np.ndarray, v_measured: float | np.ndarray,
+                   n: int | np.ndarray, *,
+                   estimated: tuple[np.ndarray, int | np.ndarray] | None = None) -> np.ndarray:
     """Log density of ``residual`` (W/(m K)) under a Student t of scale ``sqrt(v)`` whose
     degrees of freedom follow from ``v_measured`` (the squared standard error, estimated
     from ``n`` replicates, ``n - 1`` degrees of freedom) and the rest of ``v`` (taken as
@@ -420,9 +442,9 @@ def log_likelihood(residual: np.ndarray, v: np.ndarray, v_measured: float,
     more part of ``v`` that is an estimate, (its variance, its degrees of freedom), e.g. the
     shipped correction's pooled packing variance; it joins the sum's denominator."""
     v = np.asarray(v, dtype=np.float64)
-    denom = v_measured ** 2 / (n - 1)
+    denom = np.asarray(v_measured, dtype=np.float64) ** 2 / (np.asarray(n) - 1)
     if estimated is not None:
-        denom = denom + np.asarray(estimated[0]) ** 2 / max(estimated[1], 1)
+        denom = denom + np.asarray(estimated[0]) ** 2 / np.maximum(estimated[1], 1)
     nu = np.minimum(v ** 2 / np.maximum(denom, 1e-300), 1e6)
     z2 = residual ** 2 / v
     return (gammaln((nu + 1) / 2) - gammaln(nu / 2) - 0.5 * np.log(nu * math.pi * v)
@@ -454,7 +476,8 @@ def residuals(models: Mapping[str, ForwardModel], measurements: Measurements,
             cols = {p: np.array([values[p]]) for p in m.parameters}
             k, err = m.predict(cols)
             v = variance(measurements.standard_error(f), k, err, s, m.model_sd, model_form_sd)
-            v = v + (m.shared_sd(cols) * k) ** 2
+            if getattr(m, "shared_system", None) is not None:
+                v = v + (m.shared_sd(cols) * k) ** 2
             out[f] = (measurements.mean(f), float(k[0]), float(v[0]))
     return out
 

@@ -105,6 +105,17 @@ def misfit_note(record: Mapping) -> str:
     """One line on the test: passed, or failed and the model-form error the intervals carry."""
     test = (f"chi-square {record['chi2']:.1f} on {record['dof']} dof, p = "
             f"{record['p']:.2g}")
+    mf = record.get("model_form")
+    if isinstance(mf, Mapping):   # the joint posterior's structured model form
+        carried = (f"; the intervals carry the structured model-form term (per filler "
+                   f"system an offset, sd {100 * mf['offset_sd']:g} %, and a slope, sd "
+                   f"{100 * mf['slope_sd_per_5_vol_pct']:g} % per 5 vol%; chi-square with "
+                   f"it {record['chi2_with']:.1f})" if mf.get("on") else "")
+        if not record.get("misfit"):
+            return f"the fit passes its chi-square test ({test}){carried}"
+        return (f"the fit fails its chi-square test ({test} < {record['threshold_p']:g}): "
+                f"the model misses the data by more than every stated error{carried}; "
+                "flag 'model misfit'")
     if not record.get("misfit"):
         return f"the fit passes its chi-square test ({test})"
     return (f"the fit fails its chi-square test ({test} < {record['threshold_p']:g}): the "

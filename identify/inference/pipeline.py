@@ -32,6 +32,16 @@ from ..forward.model import PARAMETRISATIONS, ForwardModel, ForwardSettings
 from .alone import fit_alone
 from .calibrate import Posterior, calibrate
 from .formulations import fractions_of
+from .joint import JointPosterior
+from .joint_fit import (
+    alone_agreement,
+    as_posterior,
+    floor_sensitivity,
+    joint_fit_record,
+    joint_note,
+    run_joint,
+)
+from .joint_fit import inputs_record as inputs_record_of
 from .measurements import Measurements
 from .model_form import misfit_note, with_model_form
 from .nuisance import (
@@ -42,6 +52,7 @@ from .nuisance import (
     elasticities,
     marginalise,
 )
+from .priors import DEFAULT_MODEL_FORM, DEFAULT_RESISTANCE, ModelFormPrior, ResistancePrior
 from .screen import ScreenResult, hierarchical_screen
 
 __all__ = ["Identification", "identify", "default_inputs", "marginalised_inputs",
@@ -67,6 +78,27 @@ class Identification:
     inputs: dict = field(default_factory=dict)
     alone: list[dict] = field(default_factory=list)
     nominal: Posterior | None = None
+    joint: JointPosterior | None = None
+    priors: dict = field(default_factory=dict)
+
+    def leave_one_out(self, *, seed: int = 0) -> list[dict]:
+        """Each formulation predicted from the others (the joint posterior without the
+        model-form term, reweighted: :func:`~.joint_fit.leave_one_out_joint`)."""
+        from .joint_fit import leave_one_out_joint, run_joint
+        from .priors import ModelFormPrior
+
+        jp, lik = run_joint(self.models, self.measurements, self.priors,
+                            self.inputs.get("elasticity", {}),
+                            resistance=self.resistance_prior,
+                            model_form=ModelFormPrior(on=False), seed=seed)
+        return leave_one_out_joint(jp, lik, seed=seed)
+
+    @property
+    def resistance_prior(self):
+        """The joint posterior's resistance prior (its range is the posterior's)."""
+        from .priors import ResistancePrior
+
+        return ResistancePrior(*self.posterior.prior)
 
     @property
     def n_parameters(self) -> int:
@@ -116,7 +148,10 @@ def identify(measurements: Measurements, parametrisation: str = "gap", *,
              reuse: Mapping[str, ForwardModel] | None = None, progress: bool = False,
              echo: Callable[[str], None] = print,
              engine: SolveEngine | None = None,
-             inputs: Mapping[str, InputPrior | FilmPrior] | None = None) -> Identification:
+             inputs: Mapping[str, InputPrior | FilmPrior] | None = None,
+             resistance: ResistancePrior = DEFAULT_RESISTANCE,
+             model_form: ModelFormPrior = DEFAULT_MODEL_FORM,
+             joint: bool = True, floor_check: bool = True) -> Identification:
     """Calibrate and screen the interface parameters of one parametrisation.
 
     Parameters
@@ -147,11 +182,27 @@ def identify(measurements: Measurements, parametrisation: str = "gap", *,
         film where the settings state none; ``{}`` or a zero sd holds an input at its
         nominal value; a film prior is dropped under the per-area contact model, which has
         no film).
+    resistance, model_form : ResistancePrior, ModelFormPrior
+        The joint posterior's priors (:mod:`itr_identify.inference.priors`).
+    joint : bool
+        The posterior over the resistances and every uncertain input sampled at once
+        (:mod:`itr_identify.inference.joint`; under the gap parametrisation the two-filler
+        formulations' reduced bases then vary both resistances); False: the earlier
+        quadrature over the inputs (:func:`~itr_identify.inference.nuisance.marginalise`)
+        with a point-estimated model-form error.
+    floor_check : bool
+        With ``joint``: how the point and interval move when the resistance prior's floor
+        moves a decade (one more, shorter run; :func:`~.joint_fit.floor_sensitivity`).
     """
     if parametrisation not in PARAMETRISATIONS:
         raise ValueError(f"parametrisation: expected one of {sorted(PARAMETRISATIONS)}, got "
                          f"{parametrisation!r}")
     settings = settings or ForwardSettings()
+    lo, hi = settings.prior_m2K_per_W
+    if joint and not (lo <= resistance.low and resistance.high <= hi):
+        raise ValueError(f"resistance: the prior {resistance.low:g} - {resistance.high:g} "
+                         f"m^2 K/W reaches beyond the reduced bases' box {lo:g} - {hi:g} "
+                         "(settings.prior_m2K_per_W)")
     par = PARAMETRISATIONS[parametrisation]
     system = settings.system
     comps = {f: fractions_of(f, system) for f in measurements.formulations}
@@ -197,6 +248,8 @@ def identify(measurements: Measurements, parametrisation: str = "gap", *,
     fixed_of = {f: {p: central[p] for p in par.parameters(list(comps[f]), matrix=system.matrix)
                     if p in central}
                 for f in multis}
+    if joint and par.contact == "gap":   # the hybrids move with both resistances
+        fixed_of = {f: {} for f in multis}
     if multis:
         echo(f"  {par.name}: two-filler models ({len(multis)}), held at the single-filler "
              "posterior's central point")
@@ -218,6 +271,36 @@ def identify(measurements: Measurements, parametrisation: str = "gap", *,
         post = _corrected(models, _runtime(models, multis, echo), measurements, post,
                           faithful, grid_points, seed, rounds, echo)
         seconds["two-filler faithful corrections"] = time.perf_counter() - t
+    if joint:
+        t = time.perf_counter()
+        echo(f"  {par.name}: the joint posterior (resistances, "
+             + ", ".join(sorted(priors)) + (", " if priors else "")
+             + "the shared correction terms and the model form; emcee"
+             + ("; one full solve per filler" + (" and one at a film" if film else "")
+                + " and formulation for the inputs' elasticities)" if priors else ")"))
+        nominal = post
+        elastic = elasticities(models, post.best, film=film) if priors else {}
+        jp, _ = run_joint(models, measurements, priors, elastic, resistance=resistance,
+                          model_form=model_form, seed=seed)
+        post = as_posterior(jp, resistance=resistance, stages=nominal.stages)
+        fit = joint_fit_record(models, measurements, post, jp, model_form)
+        if floor_check:
+            fit["floor_sensitivity"] = floor_sensitivity(
+                jp, models, measurements, priors, elastic, resistance=resistance,
+                model_form=model_form, seed=seed)
+        inputs_record = {**inputs_record_of(jp, nominal, priors, seed=seed),
+                         "elasticity": elastic, "sampler": jp.summary()["sampler"]}
+        echo(f"  {par.name}: {joint_note(jp)}; {misfit_note(fit)}")
+        seconds["joint posterior"] = time.perf_counter() - t
+        alone = fit_alone(models, measurements, grid_points=grid_points, seed=seed)
+        fit["alone_agreement"] = alone_agreement(alone)
+        t = time.perf_counter()
+        echo(f"  {par.name}: the paper's screening (Eq. 4 on its grid)")
+        screening = hierarchical_screen(models, measurements)
+        seconds["screening"] = time.perf_counter() - t
+        return Identification(parametrisation, settings, models, post, screening, seconds,
+                              measurements, rounds, fit, inputs_record, alone, nominal, jp,
+                              dict(priors))
     post, fit = with_model_form(models, measurements, post, grid_points=grid_points, seed=seed)
     echo(f"  {par.name}: {misfit_note(fit)}")
     inputs_record: dict = {}

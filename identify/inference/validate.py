@@ -78,8 +78,10 @@ def posterior_prediction(model: ForwardModel, posterior: Posterior, *,
     else:
         k, err = np.full(S, model.predict({})[0][0]), np.zeros(S)
     rng = np.random.default_rng(seed)
+    shared = (model.shared_sd(cols) if model.parameters
+              and getattr(model, "shared_system", None) is not None else 0.0)
     rel = np.hypot(math.hypot(model.rve_scatter, model.model_sd, posterior.model_form_sd),
-                   model.shared_sd(cols) if model.parameters else 0.0)
+                   shared)
     k = (k * (1 + rel * rng.standard_normal(S)) + err * rng.uniform(-1, 1, S)
          + standard_error * rng.standard_normal(S))
     a = (1 - level) / 2

@@ -211,6 +211,8 @@ def error_budget(ident: Identification) -> dict:
                         "numerical_rss": float(math.hypot(*numerical)) if numerical else 0.0,
                         "slopes": {p: _slope(m, best, p) for p in m.parameters}}
     params: dict[str, dict] = {}
+    beyond: dict[str, list[str]] = {}
+    prior_width = math.log(post.prior[1] / post.prior[0])
     for p in post.names:
         using = [f for f, d in forms.items() if p in d["slopes"]]
         if not using:
@@ -227,9 +229,15 @@ def error_budget(ident: Identification) -> dict:
             if name in ("measurement noise", "RVE scatter", "surrogate error",
                         "correction uncertainty", "correction uncertainty, shared"):
                 delta = -abs(delta)  # a standard deviation: shown as the factor of +1 sd
-            factors[name] = math.exp(-delta / slope)
+            # an effect that would move R beyond the prior's whole width says only that:
+            # the model cannot turn it into a factor (k barely moves with R there)
+            factors[name] = (math.exp(-delta / slope) if abs(delta / slope) <= prior_width
+                             else None)
+            if factors[name] is None:
+                beyond.setdefault(p, []).append(name)
         params[p] = {"formulations": using, "dlnk_dlnR": slope,
-                     "interval_half_width_factor": math.sqrt(hi / lo), "factors": factors}
+                     "interval_half_width_factor": math.sqrt(hi / lo), "factors": factors,
+                     "beyond_prior": beyond.get(p, [])}
     ranked: dict[str, float] = {}
     for p, d in params.items():
         for name, fct in d["factors"].items():

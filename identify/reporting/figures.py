@@ -210,8 +210,8 @@ def parity_figure(validation: Mapping[str, list[dict]], idents: Mapping[str, Ide
     for par, rows in validation.items():
         pts = check[par]
         a.errorbar([p["full_solve"] for p in pts], [p["reduced_basis"] for p in pts],
-                   yerr=[[p["reduced_basis"] - p["lower"] for p in pts],
-                         [p["upper"] - p["reduced_basis"] for p in pts]],
+                   yerr=[[max(p["reduced_basis"] - p["lower"], 0.0) for p in pts],
+                         [max(p["upper"] - p["reduced_basis"], 0.0) for p in pts]],
                    fmt="o", capsize=2, label=f"{par} ({len(pts)} formulations)")
         corrected = any(r["level"] != "none" for r in rows)
         b.errorbar([r["measured"] for r in rows], [r["predicted"] for r in rows],
@@ -361,7 +361,8 @@ def alone_figure(ident: Identification, path: Path) -> Path | None:
         best = np.array([r["best"] for r in mine])
         lo = np.array([r["interval_90"][0] for r in mine])
         hi = np.array([r["interval_90"][1] for r in mine])
-        ax.errorbar(x, best, yerr=[best - lo, hi - best], fmt="o", capsize=4,
+        ax.errorbar(x, best, yerr=[np.maximum(best - lo, 0), np.maximum(hi - best, 0)],
+                    fmt="o", capsize=4,
                     label="each formulation alone (90 %)")
         joint = ident.at_nominal          # the formulations alone hold the inputs nominal
         jlo, jhi = joint.interval(p)

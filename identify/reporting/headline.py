@@ -50,13 +50,16 @@ from .level import level_record
 __all__ = ["parameter_flag", "prior_ends", "choose_parametrisation", "parametrisation_choice",
            "chi_square_per_dof", "fidelity_note", "headline", "headline_lines",
            "headline_markdown", "EDGE_FACTOR", "UNDETERMINED_DECADES", "FLAGS", "BIC_MARGIN",
-           "INTERVAL_FACTOR_NOTE", "QUICK_TO_STANDARD"]
+           "INTERVAL_FACTOR_NOTE", "QUICK_TO_STANDARD", "DETERMINED_FACTOR"]
 
 #: The error budget's effects that the RVE leaves out of the likelihood and that a higher
 #: fidelity removes: their combined factor on a resistance is set against its interval.
 UNCORRECTED = ("voxel bias (not corrected)", "box effect beyond the box solved")
 FLAGS = ("at the prior's edge", "undetermined", "bounded on one side", "voxel-specific",
-         "model misfit", "determined")
+         "model misfit", "bounded", "determined")
+#: The widest 90 % interval, as its half-width factor ``F = sqrt(upper / lower)``, that is
+#: called ``determined`` (on a fit that passes its test): the value within x/3.
+DETERMINED_FACTOR = 3.0
 #: BIC difference from which one parametrisation is called better supported (Kass and
 #: Raftery's "positive evidence").
 BIC_MARGIN = 2.0
@@ -83,7 +86,8 @@ def prior_ends(post, name: str) -> tuple[bool, bool]:
 def parameter_flag(ident: Identification, name: str) -> str:
     """The flag of parameter ``name`` of ``ident`` (one of :data:`FLAGS`): a value the data
     would determine is ``model misfit`` where its model fails its chi-square test
-    (:mod:`itr_identify.inference.model_form`), never ``determined``."""
+    (:mod:`itr_identify.inference.model_form`), never ``determined``; ``determined`` only
+    where its 90 % interval is within x/:data:`DETERMINED_FACTOR`, else ``bounded (x/F)``."""
     flag = ident.posterior.determination(name)
     if flag != "determined":
         return flag
@@ -91,6 +95,10 @@ def parameter_flag(ident: Identification, name: str) -> str:
         return FLAGS[4]
     if parse_parameter(name)[0] == "Rff" and ident.parametrisation == "area":
         return FLAGS[3]
+    lo, hi = ident.posterior.interval(name)
+    factor = math.sqrt(hi / lo)
+    if factor > DETERMINED_FACTOR:
+        return f"{FLAGS[5]} (x/{factor:.1f})"
     return flag
 
 
@@ -251,6 +259,10 @@ def _caveat(budget_entry: dict) -> dict:
     ``caveat`` when the first exceeds the second. What that means for quoting is said once,
     by :func:`fidelity_note`, not per value."""
     width = budget_entry["interval_half_width_factor"]
+    beyond = [k for k in UNCORRECTED if k in budget_entry.get("beyond_prior", [])]
+    if beyond:
+        return {"caveat": f"the uncorrected {' and '.join(beyond)} would move it across the "
+                          "whole prior: k hardly moves with it there"}
     factors = [budget_entry["factors"].get(k) for k in UNCORRECTED]
     factors = [f for f in factors if f is not None and f > 0]
     if not factors:
@@ -343,7 +355,11 @@ def headline(idents: Mapping[str, Identification]) -> dict:
              for p, i in idents.items()}
     choice = parametrisation_choice(idents, flags)
     params = {p: {n: {"best": i.posterior.best[n], "interval_90": list(i.posterior.interval(n)),
-                      "flag": flags[p][n], "unit": "m^2 K/W"}
+                      "flag": flags[p][n], "unit": "m^2 K/W",
+                      "half_width_factor": math.sqrt(i.posterior.interval(n)[1]
+                                                     / i.posterior.interval(n)[0]),
+                      "best_is": ("the posterior median of ln R" if i.joint is not None
+                                  else "the marginal posterior's central point")}
                   for n in i.posterior.names} for p, i in idents.items()}
     for p, i in idents.items():
         for n, without in i.fit.get("intervals_without", {}).items():
@@ -368,19 +384,41 @@ def headline(idents: Mapping[str, Identification]) -> dict:
                 s, {p: tuple(i.posterior.names) for p, i in idents.items()}, marked,
                 idents.get("gap")),
             "holds_at": f"{s.box_um:g} um box, {s.voxel_um:g} um voxels"
-                        + ("" if s.faithful is None else
-                           ", corrected to converged boxes by the shipped corrections"
-                           if s.faithful.shipped else
-                           f", corrected on faithful RVEs ({fidelity})"),
+                        + _corrected_by(idents.get("gap")),
             "parameters": params,
             "fit": {p: {k: i.fit[k] for k in ("chi2", "dof", "p", "misfit", "model_form_sd")
                         if k in i.fit} | ({"note": misfit_note(i.fit)} if i.fit else {})
                     for p, i in idents.items()}}
 
 
+def _corrected_by(gap: Identification | None) -> str:
+    """How the gap models' level was corrected, from the per-model record: by the shipped
+    corrections, at runtime, both (naming which), or not at all."""
+    if gap is None or not all(hasattr(m, "level_at") for m in gap.models.values()):
+        fa = None if gap is None else gap.settings.faithful
+        return ("" if fa is None else ", corrected to converged boxes by the shipped "
+                "corrections" if fa.shipped else ", corrected on faithful RVEs")
+    sources: dict[str, list[str]] = {}
+    for f, r in level_record(gap)["models"].items():
+        sources.setdefault(str(r["source"]), []).append(f)
+    parts = []
+    if "shipped" in sources:
+        parts.append("corrected to converged boxes by the shipped corrections"
+                     + ("" if len(sources) == 1 else f" ({', '.join(sources['shipped'])})"))
+    if "runtime" in sources:
+        parts.append("corrected on faithful RVEs in this run"
+                     + ("" if len(sources) == 1 else f" ({', '.join(sources['runtime'])})"))
+    if "none" in sources:
+        parts.append("not corrected" + ("" if len(sources) == 1 else
+                                        f" ({', '.join(sources['none'])})"))
+    return ", " + "; ".join(parts) if parts else ""
+
+
 def _legend(head: dict) -> str:
     marked = any("caveat" in e for ps in head["parameters"].values() for e in ps.values())
-    return (f"Flags: determined; bounded on one side (the 90 % interval reaches one end of "
+    return (f"Flags: determined (a fit that passes its test and a 90 % interval within "
+            f"x/{DETERMINED_FACTOR:g}); bounded (x/F) (wider than that: F = sqrt(upper end / "
+            f"lower end)); bounded on one side (the 90 % interval reaches one end of "
             f"the prior: the data bound the value from one side only); undetermined (both "
             f"ends, or wider than {UNDETERMINED_DECADES:g} decades); at the prior's edge (the "
             "best value is, and the interval reaches it); model misfit (the fit fails its "
@@ -416,8 +454,8 @@ def headline_lines(head: dict, width: int = 100) -> list[str]:
                     f"{k} {100 * v:.0f} %" for k, v in e["variance_shares"].items()))
             if e.get("narrow_first"):
                 nf = e["narrow_first"]
-                lines.append(f"    narrows most: measuring {nf['input']} (interval "
-                             f"{nf['interval'][0]:.2e} - {nf['interval'][1]:.2e} if known)")
+                lines.append(f"    narrows most: measuring {nf['input']} (expected interval "
+                             f"{nf['interval'][0]:.2e} - {nf['interval'][1]:.2e})")
             if "caveat" in e:
                 lines.append(f"    * {e['caveat']}")
         if head.get("fit", {}).get(par, {}).get("note"):
@@ -455,13 +493,15 @@ def headline_markdown(head: dict) -> list[str]:
               for n, e in params.items() if e.get("variance_shares")]
     if inputs:
         lines += ["", "The conductivities (and, where none is stated, the contact film, "
-                  "uniform over 0-5 nm) are marginalised (`itr_identify.inference.nuisance`): "
-                  "the best value and interval at the nominal inputs (the paper's "
-                  "conductivities, film 0), each input's share of the variance of log10 of "
-                  "the value, and the input whose measurement would narrow the interval "
-                  "most (a film: known at the middle of its range):", "",
+                  "uniform over 0-5 nm) are sampled with the resistances "
+                  "(`itr_identify.inference.joint`): the value and interval at the nominal "
+                  "inputs (the paper's conductivities, film 0; the grid calibration), each "
+                  "input's share of the variance of log10 of the value, and the input whose "
+                  "measurement (a conductivity to 2 %, a film to 0.5 nm) would narrow the "
+                  "interval most, with the interval expected over what that measurement could "
+                  "give:", "",
                   "| parametrisation | parameter | at the nominal inputs | shares | "
-                  "narrows most (interval if known) |", "|---|---|---|---|---|"]
+                  "narrows most (expected interval) |", "|---|---|---|---|---|"]
         for par, n, e in inputs:
             a, b = e["interval_90_nominal_inputs"]
             at = f"{e['best_nominal_inputs']:.2e} ({a:.2e} - {b:.2e})"

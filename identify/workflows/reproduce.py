@@ -36,6 +36,7 @@ from ..forward.fidelity import (
 )
 from ..forward.model import ForwardSettings
 from ..inference.formulations import fractions_of
+from ..inference.joint_fit import mark_predictive
 from ..inference.measurements import Measurements, read_measurements
 from ..inference.pipeline import Identification, identify
 from ..inference.validate import leave_one_out, validate
@@ -258,8 +259,10 @@ def _reproduce(settings: ReproduceSettings, out: Path, progress: bool,
          "formulation at the identified values")
     with _bar(n_val, "validation solves", progress) as bar:
         for par, ident in idents.items():
-            validation[par] = validate(ident.models, ident.at_nominal.best, meas,
-                                       tick=lambda: bar.update(1))
+            point = ident.posterior.best if ident.joint is not None else ident.at_nominal.best
+            validation[par] = validate(ident.models, point, meas, tick=lambda: bar.update(1))
+            if ident.joint is not None:
+                mark_predictive(validation[par], ident)
     t_val = time.perf_counter() - t
     t = time.perf_counter()
     if settings.leave_one_out:
@@ -268,6 +271,10 @@ def _reproduce(settings: ReproduceSettings, out: Path, progress: bool,
         n_lofo = sum(len(i.models) for i in idents.values())
         with _bar(n_lofo, "leave-one-out", progress, unit="formulation") as bar:
             for par, ident in idents.items():
+                if ident.joint is not None:
+                    lofo[par] = ident.leave_one_out(seed=settings.seed)
+                    bar.update(len(ident.models))
+                    continue
                 lofo[par] = leave_one_out(ident.models, meas, grid_points=settings.grid_points,
                                           seed=settings.seed, tick=lambda: bar.update(1))
     t_lofo = time.perf_counter() - t
@@ -331,6 +338,7 @@ def _reproduce_markdown(head, idents, meas, validation, lofo, psd_fits, timing,
              "reduced-basis surrogates of full voxel solves, validated with the full solver.",
              ""]
     lines += headline_markdown(head)
+    lines += [""] + report.joint_lines(idents)
     lines += ["", "## Settings", ""]
     lines += report.settings_lines(idents, {"wall time (s)": ", ".join(
         f"{k} {v:.0f}" for k, v in timing.items())})
@@ -407,7 +415,8 @@ def _identify_report(meas: Measurements, settings: ReproduceSettings, out: Path,
     for par, ident in idents.items():
         files.append(figures.posterior_figure(ident, out / f"posterior_{par}.png"))
     lines = [f"# Identified interface resistances: {meas.source}", ""]
-    lines += headline_markdown(head) + ["", "## Settings", ""]
+    lines += headline_markdown(head) + [""] + report.joint_lines(idents)
+    lines += ["", "## Settings", ""]
     lines += report.settings_lines(idents, {"wall time (s)": f"{time.perf_counter() - t0:.0f}"})
     lines += ["", "## Measurements", ""] + report.table3_lines(meas)
     lines += ["", "## Identified (m^2 K/W)", ""] + report.table5_lines(idents)

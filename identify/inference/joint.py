@@ -1,0 +1,707 @@
+"""One joint posterior over the resistances and every uncertain input, sampled by emcee.
+
+Every formulation, the two-filler ones included, is evaluated at every point of the
+parameter space::
+
+    log10 R_<filler>_<matrix>     log-uniform over the resistance prior (:mod:`.priors`)
+    ln(k_<phase> / nominal)       normal, the material system's sd (lognormal conductivities)
+    film_nm                       uniform over the film prior, where no film is stated
+    offset_<system>               standard normal: one relative offset of all a system's
+                                  formulations, of sd sqrt(u_sys(R)^2 + tau_offset^2): the
+                                  shipped correction's shared term (box step, voxel order,
+                                  tail cut; sd u_sys) and the model form's offset (sd
+                                  tau_offset), two independent normals in one (non-centred)
+    slope_<system>                standard normal: the model form's slope in the system's
+                                  filler fraction, of sd tau_slope
+    tau_offset, tau_slope         the model form's sds, half-normal priors (:mod:`.priors`)
+
+A formulation's conductivity at a point is its forward model at nominal conductivities
+(reduced basis times replica factor times correction, tabulated once, :class:`Tabulated`)
+with the exact scaling of the matrix conductivity and the first-order terms of the filler
+conductivities and the film (:mod:`.nuisance`)::
+
+    k = lam prod_f (mu_f / lam)^(s_f) exp(s_film film) k_model(lam R)
+        x (1 + sqrt(u_sys(R)^2 + tau_o^2) o_sys + tau_s c_sys z)
+
+(``lam``, ``mu_f`` the conductivities over nominal, ``z`` the formulation's filler fraction
+about its system's mean in units of 5 vol%). The likelihood is the package's one
+(:func:`~itr_identify.inference.calibrate.log_likelihood`, :func:`~itr_identify.inference.
+calibrate.variance`): per formulation a Student t of the measured mean whose degrees of
+freedom count the replicate variance and the shipped correction's pooled packing variance as
+estimates. The shared and model-form terms are parameters here, where the grid calibration
+integrates the shared term by quadrature: the same model.
+
+The sampler is emcee's affine-invariant ensemble (differential-evolution moves), chosen
+because its walkers are evaluated together: the likelihood is vectorised over the ensemble
+(every reduced basis tabulated on a grid in log10 R once), so a posterior with tens of
+thousands of effective samples takes seconds, which the 2 % convergence rule on interval
+ends needs; it is seeded and deterministic. The evidence, where a comparison of models needs
+one, comes from dynesty over the same likelihood (:func:`log_evidence`).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from scipy import special
+
+from ..forward.model import ForwardModel
+from .calibrate import log_likelihood, variance
+from .measurements import Measurements
+from .nuisance import FilmPrior, InputPrior
+from .priors import ModelFormPrior, ResistancePrior
+
+__all__ = ["Tabulated", "JointSpace", "JointLikelihood", "JointPosterior", "sample", "refine",
+           "weighted_quantile",
+           "TABLE_POINTS_1D", "TABLE_POINTS_2D", "FRACTION_UNIT"]
+
+#: Grid points of a one-parameter forward model's table over its reduced basis's box.
+TABLE_POINTS_1D = 401
+#: Grid points per axis of a two-parameter model's table.
+TABLE_POINTS_2D = 97
+#: The model-form slope's unit of filler fraction (5 vol%).
+FRACTION_UNIT = 0.05
+
+
+def _system_name(fractions: Mapping[str, float]) -> str:
+    return "-".join(sorted(fractions))
+
+
+@dataclass(frozen=True, eq=False)
+class Tabulated:
+    """A forward model as fast functions of its resistances: ln k, the relative error bound
+    and the shipped correction's shared sd on a grid in log10 R (the reduced basis's box),
+    interpolated (linear in one parameter, bilinear in two), and what the likelihood reads
+    of the model.
+
+    Attributes
+    ----------
+    formulation : str
+    parameters : tuple of str
+        Flat resistance names the model varies (0, 1 or 2).
+    fractions : dict
+        Filler volume fractions.
+    axes : tuple of ndarray
+        log10 R grid per parameter.
+    log_k, rel_err, shared : ndarray
+        On the grid (shape of the axes; scalars for a model without parameters).
+    system : str or None
+        The shipped correction's system whose shared term the model carries.
+    model_sd, rve_scatter : float
+        The model level's own relative sd and one RVE's relative scatter.
+    packing : (float, int) or None
+        The shipped correction's pooled packing sd and its degrees of freedom.
+    elasticity : dict
+        d ln k / d ln k_f per filler, and ``film_nm`` (1/nm) where the film is sampled.
+    """
+
+    formulation: str
+    parameters: tuple[str, ...]
+    fractions: dict[str, float]
+    axes: tuple[np.ndarray, ...]
+    log_k: np.ndarray
+    rel_err: np.ndarray
+    shared: np.ndarray
+    system: str | None
+    model_sd: float
+    rve_scatter: float
+    packing: tuple[float, int] | None
+    elasticity: dict[str, float] = field(default_factory=dict)
+
+    @classmethod
+    def of(cls, name: str, model: ForwardModel,
+           elasticity: Mapping[str, float]) -> Tabulated:
+        """Tabulate ``model`` over its reduced basis's box (:data:`TABLE_POINTS_1D`,
+        :data:`TABLE_POINTS_2D`); a model without parameters is one value."""
+        params = tuple(model.parameters)
+        if model.rb is None or not params:
+            k, err = model.predict({})
+            axes: tuple[np.ndarray, ...] = ()
+            k, err = np.asarray(k[:1]), np.asarray(err[:1])
+            shared = model.shared_sd({p: np.array([v]) for p, v in model.fixed.items()}) \
+                if model.fixed else np.zeros(1)
+            shape: tuple[int, ...] = ()
+        else:
+            box = model.rb.box_
+            n = TABLE_POINTS_1D if len(params) == 1 else TABLE_POINTS_2D
+            axes = tuple(np.linspace(math.log10(box.lo[box.names.index(p)]),
+                                     math.log10(box.hi[box.names.index(p)]), n)
+                         for p in params)
+            mesh = np.meshgrid(*axes, indexing="ij")
+            cols = {p: 10 ** m.ravel() for p, m in zip(params, mesh)}
+            k, err = model.predict(cols)
+            shared = model.shared_sd(cols)
+            shape = mesh[0].shape
+        pack = model.packing_dof
+        return cls(name, params, dict(model.fractions), axes,
+                   np.log(k).reshape(shape), (err / k).reshape(shape),
+                   np.asarray(shared, dtype=float).reshape(shape), model.shared_system,
+                   float(model.model_sd), float(model.rve_scatter), pack,
+                   {k_: float(v) for k_, v in elasticity.items()})
+
+    @property
+    def group(self) -> str:
+        """The filler system the formulation belongs to (its fillers joined by '-')."""
+        return _system_name(self.fractions)
+
+    def evaluate(self, log10_r: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(k, relative error bound, shared sd), each (N,), at ``log10_r`` (N, P) (held
+        inside the table's box: the scaled resistance of an extreme conductivity beyond it
+        takes the box's edge)."""
+        n = log10_r.shape[0]
+        if not self.axes:
+            return (np.full(n, math.exp(float(self.log_k.ravel()[0]))),
+                    np.full(n, float(self.rel_err.ravel()[0])),
+                    np.full(n, float(self.shared.ravel()[0])))
+        if len(self.axes) == 1:
+            x = log10_r[:, 0]
+            ax = self.axes[0]
+            return (np.exp(np.interp(x, ax, self.log_k)), np.interp(x, ax, self.rel_err),
+                    np.interp(x, ax, self.shared))
+        x = log10_r
+        return (np.exp(_bilinear(self.axes, self.log_k, x)),
+                _bilinear(self.axes, self.rel_err, x), _bilinear(self.axes, self.shared, x))
+
+
+def _bilinear(axes: tuple[np.ndarray, np.ndarray], table: np.ndarray,
+              x: np.ndarray) -> np.ndarray:
+    """Bilinear interpolation of ``table`` on the regular ``axes`` at the rows of ``x``
+    (N, 2), clipped into the grid."""
+    out_idx, out_w = [], []
+    for d, ax in enumerate(axes):
+        step = ax[1] - ax[0]
+        t = np.clip((x[:, d] - ax[0]) / step, 0.0, len(ax) - 1 - 1e-9)
+        i = np.floor(t).astype(int)
+        out_idx.append(i)
+        out_w.append(t - i)
+    (i, j), (a, b) = out_idx, out_w
+    return ((1 - a) * (1 - b) * table[i, j] + a * (1 - b) * table[i + 1, j]
+            + (1 - a) * b * table[i, j + 1] + a * b * table[i + 1, j + 1])
+
+
+
+@dataclass(frozen=True)
+class JointSpace:
+    """The sampled parameters, their priors and the held ones.
+
+    Attributes
+    ----------
+    names : tuple of str
+        Sampled parameters, in the order of a point's coordinates (module notes).
+    kinds : tuple of str
+        Per parameter its prior: ``"uniform"`` (over ``a`` to ``b``), ``"normal"`` (mean
+        ``a``, sd ``b``) or ``"halfnormal"`` (scale ``b``).
+    a, b : tuple of float
+    held : dict
+        Parameters held at a value (a stated input, a resistance fixed by the caller).
+    groups : dict
+        Per formulation its filler system and standardised filler fraction ``z``.
+    matrix : str
+        The matrix phase (its conductivity scales the resistances).
+    """
+
+    names: tuple[str, ...]
+    kinds: tuple[str, ...]
+    a: tuple[float, ...]
+    b: tuple[float, ...]
+    held: dict[str, float]
+    groups: dict[str, tuple[str, float]]
+    matrix: str
+
+    @classmethod
+    def build(cls, tables: Mapping[str, Tabulated], *, matrix: str,
+              resistance: ResistancePrior, inputs: Mapping[str, InputPrior | FilmPrior],
+              model_form: ModelFormPrior, hold: Mapping[str, float] | None = None
+              ) -> JointSpace:
+        """The space of ``tables`` (module notes): their resistances over ``resistance``,
+        the ``inputs`` with a non-zero sd (a film only where the tables carry its
+        elasticity), one shared term per shipped system, and the model form per filler
+        system where ``model_form.on``; ``hold`` fixes any of them (log10 R values for a
+        resistance)."""
+        lo, hi = resistance.log10_bounds
+        spec: list[tuple[str, str, float, float]] = []
+        for p in sorted({p for t in tables.values() for p in t.parameters}):
+            spec.append((f"log10 {p}", "uniform", lo, hi))
+        film_used = any("film_nm" in t.elasticity for t in tables.values())
+        for name, pr in sorted(inputs.items()):
+            if isinstance(pr, FilmPrior):
+                if film_used:
+                    spec.append(("film_nm", "uniform", pr.low_nm, pr.high_nm))
+            elif pr.rel_sd > 0:
+                spec.append((f"ln {pr.name}", "normal", 0.0, pr.rel_sd))
+        groups = _groups(tables)
+        stated: dict[str, float] = {}
+        if model_form.on and model_form.hyper:
+            spec.append(("tau_offset", "halfnormal", 0.0, model_form.offset_scale))
+            spec.append(("tau_slope", "halfnormal", 0.0, model_form.slope_scale))
+        elif model_form.on:
+            stated = {"tau_offset": model_form.offset_scale,
+                      "tau_slope": model_form.slope_scale}
+        shipped = {t.group for t in tables.values() if t.system}
+        for g in sorted({g for g, _ in groups.values()}):
+            if model_form.on or g in shipped:
+                spec.append((f"offset_{g}", "normal", 0.0, 1.0))
+            if model_form.on and len({z for gg, z in groups.values() if gg == g}) > 1:
+                spec.append((f"slope_{g}", "normal", 0.0, 1.0))
+        held = dict(hold or {})
+        unknown = sorted(set(held) - {s[0] for s in spec} - set(stated))
+        held = {**stated, **held}
+        if unknown:
+            raise ValueError(f"hold: {unknown[0]!r} is no parameter of this space (have "
+                             f"{', '.join(s[0] for s in spec)})")
+        spec = [s for s in spec if s[0] not in held]
+        if not spec:
+            raise ValueError("hold: every parameter is held; nothing to sample")
+        return cls(tuple(s[0] for s in spec), tuple(s[1] for s in spec),
+                   tuple(s[2] for s in spec), tuple(s[3] for s in spec), held, groups, matrix)
+
+    @property
+    def dim(self) -> int:
+        return len(self.names)
+
+    def log_prior(self, theta: np.ndarray) -> np.ndarray:
+        """Log prior density (N,) of the points ``theta`` (N, D); -inf outside."""
+        out = np.zeros(theta.shape[0])
+        for i, (kind, a, b) in enumerate(zip(self.kinds, self.a, self.b)):
+            x = theta[:, i]
+            if kind == "uniform":
+                out += np.where((x >= a) & (x <= b), -math.log(b - a), -np.inf)
+            elif kind == "normal":
+                out += -0.5 * ((x - a) / b) ** 2 - math.log(b * math.sqrt(2 * math.pi))
+            else:
+                out += np.where(x >= 0, -0.5 * (x / b) ** 2
+                                + math.log(math.sqrt(2 / math.pi) / b), -np.inf)
+        return out
+
+    def draw(self, rng: np.random.Generator, n: int) -> np.ndarray:
+        """``n`` points from the prior, (n, D)."""
+        out = np.empty((n, self.dim))
+        for i, (kind, a, b) in enumerate(zip(self.kinds, self.a, self.b)):
+            if kind == "uniform":
+                out[:, i] = rng.uniform(a, b, n)
+            elif kind == "normal":
+                out[:, i] = rng.normal(a, b, n)
+            else:
+                out[:, i] = np.abs(rng.normal(0.0, b, n))
+        return out
+
+    def from_unit(self, u: np.ndarray) -> np.ndarray:
+        """The prior transform of a point of the unit cube (nested sampling), (..., D)."""
+        out = np.empty_like(u, dtype=float)
+        for i, (kind, a, b) in enumerate(zip(self.kinds, self.a, self.b)):
+            if kind == "uniform":
+                out[..., i] = a + (b - a) * u[..., i]
+            elif kind == "normal":
+                out[..., i] = a + b * special.ndtri(u[..., i])
+            else:
+                out[..., i] = b * special.ndtri(0.5 + 0.5 * u[..., i])
+        return out
+
+    def columns(self, theta: np.ndarray) -> dict[str, np.ndarray]:
+        """Every parameter's column (N,) at the points ``theta``, the held ones too."""
+        n = theta.shape[0]
+        cols = {name: theta[:, i] for i, name in enumerate(self.names)}
+        cols.update({k: np.full(n, float(v)) for k, v in self.held.items()})
+        return cols
+
+
+def _groups(tables: Mapping[str, Tabulated]) -> dict[str, tuple[str, float]]:
+    """Per formulation its filler system and its total filler fraction about the system's
+    mean, in :data:`FRACTION_UNIT`."""
+    by: dict[str, list[float]] = {}
+    for t in tables.values():
+        by.setdefault(t.group, []).append(sum(t.fractions.values()))
+    return {f: (t.group, (sum(t.fractions.values()) - float(np.mean(by[t.group])))
+                / FRACTION_UNIT) for f, t in tables.items()}
+
+
+class JointLikelihood:
+    """The log likelihood of the measured means at points of a :class:`JointSpace`,
+    vectorised over the points and the formulations (module notes; the tables of one shape
+    are stacked and interpolated together)."""
+
+    def __init__(self, tables: Mapping[str, Tabulated], measurements: Measurements,
+                 space: JointSpace, *, scatter: Mapping[str, float]) -> None:
+        missing = sorted(set(tables) - set(measurements.formulations))
+        if missing:
+            raise ValueError(f"measurements: no measured values for {missing[0]!r}")
+        self.tables = dict(tables)
+        self.space = space
+        self.scatter = dict(scatter)
+        self.data = {f: (measurements.mean(f), measurements.standard_error(f),
+                         measurements.values[f].size) for f in tables}
+        self._prepare()
+
+    def _prepare(self) -> None:
+        tabs = list(self.tables.values())
+        self.order = list(self.tables)
+        by: dict[tuple, list[int]] = {}
+        for i, t in enumerate(tabs):
+            key = (len(t.parameters),) + tuple((a[0], a[-1], a.size) for a in t.axes)
+            by.setdefault(key, []).append(i)
+        self._stacks = []
+        for key, idx in by.items():
+            ts = [tabs[i] for i in idx]
+            self._stacks.append((np.array(idx), key[0], ts[0].axes,
+                                 [t.parameters for t in ts],
+                                 *(np.stack([np.asarray(getattr(t, a), float) for t in ts])
+                                   for a in ("log_k", "rel_err", "shared"))))
+        self._fillers = sorted({x for t in tabs for x in t.elasticity if x != "film_nm"})
+        self._s = np.array([[t.elasticity.get(x, 0.0) for x in self._fillers] for t in tabs]
+                           ).reshape(len(tabs), len(self._fillers))
+        self._film = np.array([t.elasticity.get("film_nm", 0.0) for t in tabs])
+        self._system = np.array([t.system is not None for t in tabs], dtype=float)
+        self._group = [self.space.groups[f][0] for f in self.order]
+        self._z = np.array([self.space.groups[f][1] for f in self.order])
+        col = lambda a: np.array(a, dtype=float)[:, None]  # noqa: E731 - (F, 1) columns
+        self._mean = col([self.data[f][0] for f in self.order])
+        self._se = col([self.data[f][1] for f in self.order])
+        self._n = col([self.data[f][2] for f in self.order])
+        self._scatter = col([self.scatter[t.group] for t in tabs])
+        self._model_sd = col([t.model_sd for t in tabs])
+        self._pack = col([t.packing[0] if t.packing else 0.0 for t in tabs])
+        self._dof = col([t.packing[1] if t.packing else 1 for t in tabs])
+
+    def _interp(self, stack, cols: Mapping[str, np.ndarray], shift: np.ndarray):
+        idx, dim, axes, params, log_k, rel_err, shared = stack
+        n = shift.size
+        if dim == 0:
+            return tuple(np.repeat(a.reshape(-1, 1), n, axis=1) for a in (log_k, rel_err,
+                                                                           shared))
+        rows = np.arange(len(idx))[:, None]
+        where = []
+        for d, ax in enumerate(axes):
+            x = np.stack([cols[f"log10 {p[d]}"] for p in params]) + shift[None, :]
+            t = np.clip((x - ax[0]) / (ax[1] - ax[0]), 0.0, ax.size - 1 - 1e-9)
+            i = np.floor(t).astype(int)
+            where.append((i, t - i))
+        if dim == 1:
+            (i, w), = where
+            return tuple(a[rows, i] * (1 - w) + a[rows, i + 1] * w
+                         for a in (log_k, rel_err, shared))
+        (i, a_), (j, b_) = where
+        return tuple((1 - a_) * (1 - b_) * t[rows, i, j] + a_ * (1 - b_) * t[rows, i + 1, j]
+                     + (1 - a_) * b_ * t[rows, i, j + 1] + a_ * b_ * t[rows, i + 1, j + 1]
+                     for t in (log_k, rel_err, shared))
+
+    def conductivities_all(self, cols: Mapping[str, np.ndarray]
+                           ) -> tuple[np.ndarray, np.ndarray]:
+        """(k, error bound), each (F, N) in :attr:`order`, at the parameter ``cols``, W/(m K),
+        with the shared correction term and the model form applied."""
+        n = next(iter(cols.values())).size
+        zeros = np.zeros(n)
+        ln_lam = cols.get(f"ln k_{self.space.matrix}", zeros)
+        F = len(self.order)
+        log_k, rel_err, shared = (np.empty((F, n)) for _ in range(3))
+        for stack in self._stacks:
+            lk, re, sh = self._interp(stack, cols, ln_lam / math.log(10))
+            log_k[stack[0]], rel_err[stack[0]], shared[stack[0]] = lk, re, sh
+        ln_fac = (1 - self._s.sum(axis=1))[:, None] * ln_lam[None, :]
+        for j, filler in enumerate(self._fillers):
+            ln_fac += self._s[:, j][:, None] * cols.get(f"ln k_{filler}", zeros)[None, :]
+        ln_fac += self._film[:, None] * cols.get("film_nm", zeros)[None, :]
+        k = np.exp(log_k + ln_fac)
+        err = rel_err * k
+        tau = cols.get("tau_offset", 0.0)
+        tau_s = cols.get("tau_slope", 0.0)
+        for i, g in enumerate(self._group):
+            if f"offset_{g}" not in cols:
+                continue
+            scale = np.sqrt(self._system[i] * shared[i] ** 2 + tau ** 2)
+            shift = scale * cols[f"offset_{g}"]
+            if f"slope_{g}" in cols:
+                shift = shift + tau_s * cols[f"slope_{g}"] * self._z[i]
+            k[i] *= 1 + shift
+        return k, err
+
+    def conductivities(self, cols: Mapping[str, np.ndarray], f: str
+                       ) -> tuple[np.ndarray, np.ndarray]:
+        """(k, error bound), each (N,), of formulation ``f`` (:meth:`conductivities_all`)."""
+        k, err = self.conductivities_all(cols)
+        i = self.order.index(f)
+        return k[i], err[i]
+
+    def terms(self, theta: np.ndarray) -> np.ndarray:
+        """Each formulation's log-likelihood term, (F, N) in :attr:`order`, at the points
+        ``theta`` (N, D): :func:`~itr_identify.inference.calibrate.log_likelihood` of the
+        measured mean with :func:`~itr_identify.inference.calibrate.variance`, the pooled
+        packing variance counted as an estimate."""
+        cols = self.space.columns(np.atleast_2d(theta))
+        k, err = self.conductivities_all(cols)
+        v = variance(self._se, k, err, self._scatter, self._model_sd)
+        return log_likelihood(self._mean - k, v, self._se ** 2, self._n,
+                              estimated=((self._pack * k) ** 2, self._dof))
+
+    def per_formulation(self, theta: np.ndarray) -> dict[str, np.ndarray]:
+        """Each formulation's log-likelihood term (N,) at the points ``theta`` (N, D)."""
+        return dict(zip(self.order, self.terms(theta)))
+
+    def __call__(self, theta: np.ndarray) -> np.ndarray:
+        return self.terms(theta).sum(axis=0)
+
+    def log_posterior(self, theta: np.ndarray) -> np.ndarray:
+        """Unnormalised log posterior (N,) of the points ``theta`` (N, D)."""
+        theta = np.atleast_2d(theta)
+        lp = self.space.log_prior(theta)
+        ok = np.isfinite(lp)
+        out = np.full(theta.shape[0], -np.inf)
+        if ok.any():
+            out[ok] = lp[ok] + self(theta[ok])
+        return out
+
+
+#: Autocorrelation times each parameter's chain must span after burn-in (emcee's rule of
+#: thumb is 50).
+CHAIN_TAUS = 50
+#: Independent draws the chain must be worth: the 5 % and 95 % quantiles of log10 R then
+#: carry a Monte-Carlo error of a few tenths of a per cent of R, and a run twice as long
+#: moves no interval end by more than about 1 %.
+TARGET_DRAWS = 20000
+#: Steps per round of sampling, and the most steps before the sampler says it did not
+#: converge.
+ROUND_STEPS = 2000
+MAX_STEPS = 100000
+
+
+def weighted_quantile(x: np.ndarray, q, weights: np.ndarray | None = None) -> np.ndarray:
+    """Quantiles ``q`` of the draws ``x`` with ``weights`` (None: equal), interpolated in
+    the cumulative weight at each draw's centre."""
+    if weights is None:
+        return np.quantile(x, q)
+    order = np.argsort(x)
+    w = weights[order]
+    c = (np.cumsum(w) - 0.5 * w) / w.sum()
+    return np.interp(q, c, x[order])
+
+
+@dataclass(frozen=True, eq=False)
+class JointPosterior:
+    """Draws of a joint posterior, weighted (frozen).
+
+    Attributes
+    ----------
+    names : tuple of str
+        The sampled parameters (columns of :attr:`samples`).
+    samples : ndarray
+        (S, D) the chain's draws after burn-in, walkers and steps flattened.
+    weights : ndarray
+        (S,) their normalised weights (equal for a chain's draws).
+    held : dict
+        Parameters held at a value.
+    log_likelihood : ndarray
+        (S,) the log likelihood of each draw.
+    autocorr : dict
+        The chain's integrated autocorrelation time per parameter, steps.
+    acceptance : float
+        Mean acceptance fraction of the walkers.
+    walkers, steps, burn, seed : int
+    converged : bool
+        Whether every chain spans :data:`CHAIN_TAUS` autocorrelation times.
+    effective_draws : float
+        What the draws are worth in independent draws (walkers x steps over the longest
+        autocorrelation time).
+    log_evidence, log_evidence_se : float
+        ``ln Z``, the data's likelihood averaged over the prior, and its Monte-Carlo
+        standard error (:func:`refine`).
+    """
+
+    names: tuple[str, ...]
+    samples: np.ndarray
+    weights: np.ndarray
+    held: dict[str, float]
+    log_likelihood: np.ndarray
+    autocorr: dict[str, float]
+    acceptance: float
+    walkers: int
+    steps: int
+    burn: int
+    seed: int
+    converged: bool
+    effective_draws: float = float("nan")
+    log_evidence: float = float("nan")
+    log_evidence_se: float = float("nan")
+
+    def column(self, name: str) -> np.ndarray:
+        if name in self.held:
+            return np.full(self.samples.shape[0], float(self.held[name]))
+        if name not in self.names:
+            raise ValueError(f"name: no parameter {name!r} (have {', '.join(self.names)})")
+        return self.samples[:, self.names.index(name)]
+
+    @property
+    def resistances(self) -> list[str]:
+        """The flat names of the sampled resistances."""
+        return [n.split(" ", 1)[1] for n in self.names if n.startswith("log10 ")]
+
+    def quantile(self, name: str, q) -> np.ndarray:
+        """Weighted quantiles of a parameter (its sampled scale: log10 R, ln k, nm, ...)."""
+        return weighted_quantile(self.column(name), q, self.weights)
+
+    def point(self, resistance: str) -> float:
+        """The posterior median of ln R (the point quoted), m^2 K/W."""
+        return float(10 ** self.quantile(f"log10 {resistance}", 0.5))
+
+    def interval(self, resistance: str, level: float = 0.9) -> tuple[float, float]:
+        """The equal-tailed ``level`` credible interval of R, m^2 K/W."""
+        a = (1 - level) / 2
+        lo, hi = self.quantile(f"log10 {resistance}", [a, 1 - a])
+        return float(10 ** lo), float(10 ** hi)
+
+    def half_width_factor(self, resistance: str, level: float = 0.9) -> float:
+        """``F = sqrt(hi / lo)``: the interval is the point times or over about F."""
+        lo, hi = self.interval(resistance, level)
+        return math.sqrt(hi / lo)
+
+    def resample(self, n: int, seed: int = 0) -> np.ndarray:
+        """``n`` row indices drawn by weight (systematic resampling): equal-weight draws."""
+        rng = np.random.default_rng(seed)
+        c = np.cumsum(self.weights)
+        c /= c[-1]
+        return np.minimum(np.searchsorted(c, (rng.uniform() + np.arange(n)) / n),
+                          len(c) - 1)
+
+    def summary(self) -> dict[str, Any]:
+        """Per resistance its point, interval and F; the sampler's diagnostics."""
+        return {"parameters": {r: {"point": self.point(r), "interval_90": self.interval(r),
+                                   "half_width_factor": self.half_width_factor(r),
+                                   "unit": "m^2 K/W", "point_is": "posterior median of ln R"}
+                               for r in self.resistances},
+                "sampler": {"library": "emcee", "walkers": self.walkers, "steps": self.steps,
+                            "burn": self.burn, "seed": self.seed,
+                            "acceptance": self.acceptance, "converged": self.converged,
+                            "autocorr_steps": self.autocorr,
+                            "effective_draws": self.effective_draws,
+                            "log_evidence": self.log_evidence,
+                            "log_evidence_se": self.log_evidence_se}}
+
+
+#: Importance draws of :func:`refine`.
+REFINE_DRAWS = 200_000
+#: Degrees of freedom and covariance inflation of the refinement's multivariate t, and its
+#: rounds (each refits the proposal on the previous round's weighted draws).
+REFINE_DF = 5
+REFINE_INFLATE = 1.5
+REFINE_ROUNDS = 2
+
+
+def refine(likelihood: JointLikelihood, chain: np.ndarray, *, seed: int,
+           draws: int = REFINE_DRAWS) -> tuple[np.ndarray, np.ndarray, float, float, float]:
+    """Importance sampling from a multivariate t (``REFINE_DF`` dof) fitted to the chain's
+    draws (their mean and covariance times ``REFINE_INFLATE``, refitted once on the
+    weighted draws): ``draws`` points, each weighted by posterior over proposal, evaluated
+    together. The mean weight is the evidence ``Z`` (the prior normalised), with its
+    Monte-Carlo standard error; the weights' effective number says how far to trust it.
+    Returns (draws, normalised weights, effective draws, ln Z, its standard error)."""
+    rng = np.random.default_rng(seed + 7919)
+    mu = chain.mean(axis=0)
+    cov = np.atleast_2d(np.cov(chain, rowvar=False))
+    best = None
+    for _ in range(REFINE_ROUNDS):   # population Monte Carlo: refit on the weighted draws
+        out = _importance(likelihood, mu, cov * REFINE_INFLATE, rng, draws)
+        if best is None or out[2] > best[2]:
+            best = out
+        x, w = out[0], out[1]
+        mu = w @ x
+        d = x - mu
+        cov = (d * w[:, None]).T @ d
+    return best
+
+
+def _importance(likelihood: JointLikelihood, mu: np.ndarray, cov: np.ndarray,
+                rng: np.random.Generator, draws: int
+                ) -> tuple[np.ndarray, np.ndarray, float, float, float]:
+    """One round of :func:`refine` with the t proposal of centre ``mu``, scale ``cov``."""
+    dim = mu.size
+    L = np.linalg.cholesky(cov + 1e-12 * np.eye(dim) * np.trace(cov) / dim)
+    z = rng.standard_normal((draws, dim))
+    u = rng.chisquare(REFINE_DF, draws) / REFINE_DF
+    x = mu + (z @ L.T) / np.sqrt(u)[:, None]
+    r2 = np.sum(z ** 2, axis=1) / u             # Mahalanobis distance of each draw
+    logq = (special.gammaln((REFINE_DF + dim) / 2) - special.gammaln(REFINE_DF / 2)
+            - 0.5 * dim * math.log(REFINE_DF * math.pi) - np.sum(np.log(np.diag(L)))
+            - 0.5 * (REFINE_DF + dim) * np.log1p(r2 / REFINE_DF))
+    logp = np.concatenate([likelihood.log_posterior(x[i:i + 20000])
+                           for i in range(0, draws, 20000)])
+    logw = logp - logq
+    top = np.max(logw)
+    w = np.exp(logw - top)
+    mean_w = w.mean()
+    ln_z = top + math.log(mean_w)
+    se = float(w.std(ddof=1) / math.sqrt(draws) / mean_w)
+    w /= w.sum()
+    return x, w, float(1 / np.sum(w ** 2)), ln_z, se
+
+
+def _autocorr(chain: np.ndarray) -> np.ndarray:
+    """Integrated autocorrelation time per parameter, steps (emcee's estimator, its
+    short-chain warning silenced: the caller's rule decides)."""
+    import logging
+
+    import emcee
+
+    log = logging.getLogger("emcee.autocorr")
+    level = log.level
+    log.setLevel(logging.ERROR)
+    try:
+        return emcee.autocorr.integrated_time(chain, quiet=True)
+    finally:
+        log.setLevel(level)
+
+
+def _start(likelihood: JointLikelihood, rng: np.random.Generator, walkers: int
+           ) -> np.ndarray:
+    """Walkers' start: the best of many prior draws by posterior, with their spread (the
+    top 2 ``walkers`` draws, ``walkers`` of them at random)."""
+    draws = likelihood.space.draw(rng, 200 * walkers)
+    lp = likelihood.log_posterior(draws)
+    top = np.argsort(lp)[::-1][:2 * walkers]
+    return draws[rng.choice(top, walkers, replace=False)]
+
+
+def sample(likelihood: JointLikelihood, *, seed: int = 0, walkers: int | None = None,
+           steps: int | None = None, burn: int | None = None) -> JointPosterior:
+    """Sample the posterior of ``likelihood`` (its space's priors) with emcee: ``walkers``
+    (default four per dimension, at least 32) differential-evolution walkers, seeded; by
+    default rounds of :data:`ROUND_STEPS` steps until, after a burn-in of a third of the
+    steps, every parameter's chain spans :data:`CHAIN_TAUS` autocorrelation times and the
+    draws are worth :data:`TARGET_DRAWS` independent ones (walkers x steps over the longest
+    autocorrelation time), at most :data:`MAX_STEPS` (then ``converged`` is False and the
+    caller says so); ``steps``: run exactly that many after ``burn``. The evidence is then
+    estimated by importance sampling from the chain (:func:`refine`)."""
+    import emcee
+
+    space = likelihood.space
+    dim = space.dim
+    walkers = walkers or max(32, 4 * dim + (4 * dim) % 2)
+    rng = np.random.default_rng(seed)
+    start = _start(likelihood, rng, walkers)
+    sampler = emcee.EnsembleSampler(
+        walkers, dim, likelihood.log_posterior, vectorize=True,
+        moves=[(emcee.moves.DEMove(), 0.8), (emcee.moves.DESnookerMove(), 0.2)])
+    sampler.random_state = np.random.RandomState(seed).get_state()
+    state, total = start, 0
+    target = steps + (burn or 0) if steps is not None else None
+    while True:
+        n = ROUND_STEPS if target is None else target - total
+        state = sampler.run_mcmc(state, n, progress=False)
+        total += n
+        discard = burn if burn is not None else total // 3
+        tau = _autocorr(sampler.get_chain(discard=discard))
+        kept = total - discard
+        worth = walkers * kept / max(float(np.max(tau)), 1.0)
+        converged = bool(np.all(kept >= CHAIN_TAUS * tau) and worth >= TARGET_DRAWS)
+        if target is not None or converged or total >= MAX_STEPS:
+            break
+    chain = sampler.get_chain(discard=discard, flat=True)
+    logp = sampler.get_log_prob(discard=discard, flat=True)
+    ll = logp - space.log_prior(chain)
+    _, _, _, ln_z, ln_z_se = refine(likelihood, chain, seed=seed)
+    n = chain.shape[0]
+    return JointPosterior(space.names, chain, np.full(n, 1.0 / n), dict(space.held), ll,
+                          dict(zip(space.names, map(float, tau))),
+                          float(np.mean(sampler.acceptance_fraction)), walkers, kept,
+                          discard, seed, converged, worth, ln_z, ln_z_se)

@@ -1,0 +1,111 @@
+"""The joint posterior inside the identification (issue 59), on small real forward models:
+the hybrids vary both resistances and move with every input, the fit's test, the flags,
+leave-one-out from the others' posterior, the formulations alone tested for agreement and
+the floor's sensitivity. Small RVEs (12 um box, 0.5 um voxels) keep it fast."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from itr_fv.rve.spec import RVESpec
+from itr_identify.forward.model import ForwardSettings
+from itr_identify.inference.joint import JointLikelihood, Tabulated
+from itr_identify.inference.joint_fit import alone_agreement
+from itr_identify.inference.measurements import Measurements, read_measurements
+from itr_identify.inference.pipeline import identify
+from itr_identify.reporting.headline import DETERMINED_FACTOR, parameter_flag
+
+SMALL = ForwardSettings(RVESpec(box_um=12.0, voxel_um=0.5, seed=3), replicas=2)
+FORMS = ("Al2O3-55", "Al2O3-60", "AlN-55", "AlN-60", "Al2O3-30-AlN-30")
+
+
+@pytest.fixture(scope="module")
+def ident():
+    t3 = read_measurements()
+    meas = Measurements({f: t3.values[f] for f in FORMS}, "Table 3, five formulations")
+    return identify(meas, "gap", settings=SMALL, grid_points=41, seed=0,
+                    echo=lambda line: None)
+
+
+def test_the_hybrid_varies_both_resistances_and_moves_with_the_matrix_alone(ident):
+    hybrid = ident.models["Al2O3-30-AlN-30"]
+    assert hybrid.fixed == {} and hybrid.rb is not None
+    assert set(hybrid.parameters) == {"R_AlN_silicone", "R_Al2O3_silicone"}
+    tab = Tabulated.of("Al2O3-30-AlN-30", hybrid, ident.inputs["elasticity"]["Al2O3-30-AlN-30"])
+    k0 = hybrid.predict({"R_Al2O3_silicone": np.array([2e-8]),
+                         "R_AlN_silicone": np.array([3e-8])})[0][0]
+    at = {"R_Al2O3_silicone": 2e-8, "R_AlN_silicone": 3e-8}
+    k, _, _ = tab.evaluate(np.log10([[at[p] for p in tab.parameters]]))
+    assert k[0] == pytest.approx(k0, rel=2e-3)       # the table holds the model
+    lik = JointLikelihood({"Al2O3-30-AlN-30": tab}, ident.measurements,
+                          _space(ident, {"Al2O3-30-AlN-30": tab}), scatter={"Al2O3-AlN": 0.01})
+    names = lik.space.names
+    theta = np.zeros((2, len(names)))
+    for i, n in enumerate(names):
+        if n.startswith("log10"):
+            theta[:, i] = math.log10(2e-8)
+    theta[1, names.index("ln k_silicone")] = math.log(1.1)
+    k = lik.conductivities(lik.space.columns(theta), "Al2O3-30-AlN-30")[0]
+    assert k[1] > k[0] * 1.02          # a matrix 10 % more conductive: the hybrid too
+
+
+def _space(ident, tables):
+    from itr_identify.inference.joint import JointSpace
+    from itr_identify.inference.priors import DEFAULT_MODEL_FORM
+
+    return JointSpace.build(tables, matrix="silicone", resistance=ident.resistance_prior,
+                            inputs=ident.priors, model_form=DEFAULT_MODEL_FORM)
+
+
+def test_the_posterior_is_the_joint_ones_with_its_point_and_record(ident):
+    jp = ident.joint
+    assert jp is not None and jp.converged
+    for r in ("R_Al2O3_silicone", "R_AlN_silicone"):
+        assert ident.posterior.best[r] == pytest.approx(jp.point(r), rel=1e-12)
+        lo, hi = ident.posterior.interval(r)
+        assert lo < ident.posterior.best[r] < hi
+        assert (lo, hi) == pytest.approx(jp.interval(r), rel=2e-3)
+    assert ident.posterior.prior == (1e-9, 1e-6)
+    fit = ident.fit
+    assert fit["dof"] == len(FORMS) - 2 and 0 <= fit["p"] <= 1
+    assert fit["chi2_with"] <= fit["chi2"]         # the model form's variance only adds
+    for key in ("ln k_silicone", "ln k_Al2O3", "ln k_AlN", "film_nm", "offset_Al2O3"):
+        assert key in jp.names
+    shares = ident.inputs["parameters"]["R_AlN_silicone"]["shares"]
+    assert sum(shares.values()) == pytest.approx(1.0, abs=1e-9)
+    assert all(v >= -1e-9 for v in shares.values())
+    floor = fit["floor_sensitivity"]
+    assert set(floor) == {"floor 1e-08", "floor 1e-10", "floor 1e-09 (the prior)"}
+
+
+def test_a_value_is_determined_only_within_x_over_three_on_a_passing_fit(ident):
+    for r in ident.posterior.names:
+        flag = parameter_flag(ident, r)
+        lo, hi = ident.posterior.interval(r)
+        if flag == "determined":
+            assert math.sqrt(hi / lo) <= DETERMINED_FACTOR and not ident.fit["misfit"]
+        if flag.startswith("bounded ("):
+            assert flag == f"bounded (x/{math.sqrt(hi / lo):.1f})"
+
+
+def test_leave_one_out_predicts_each_formulation_from_the_others(ident):
+    rows = ident.leave_one_out(seed=1)
+    assert [r["formulation"] for r in rows] == list(ident.models)
+    for r in rows:
+        lo, hi = r["interval_90"]
+        assert lo < r["predicted"] < hi and r["effective_draws"] > 10
+        assert r["inside"] == (lo <= r["measured"] <= hi)
+
+
+def test_formulations_alone_are_tested_for_agreement():
+    rows = [{"formulation": "a", "parameter": "R", "best": 1e-8, "interval_90": [5e-9, 2e-8]},
+            {"formulation": "b", "parameter": "R", "best": 1.2e-8,
+             "interval_90": [6e-9, 2.4e-8]},
+            {"formulation": "c", "parameter": "R", "best": 1e-7, "interval_90": [8e-8, 1.25e-7]}]
+    out = alone_agreement(rows)["R"]
+    assert out["dof"] == 2 and not out["agree"] and out["p"] < 0.01
+    agree = alone_agreement(rows[:2])["R"]
+    assert agree["agree"] and agree["p"] > 0.5

@@ -1,0 +1,164 @@
+"""The joint posterior over resistances and inputs (issue 59): tabulated forward models,
+the parameter space and its priors, the vectorised likelihood, the seeded sampler."""
+
+from __future__ import annotations
+
+import math
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from itr_identify.inference.formulations import fractions_of
+from itr_identify.inference.joint import (
+    JointLikelihood,
+    JointSpace,
+    Tabulated,
+    sample,
+)
+from itr_identify.inference.measurements import Measurements
+from itr_identify.inference.nuisance import FilmPrior, InputPrior
+from itr_identify.inference.priors import ModelFormPrior, ResistancePrior
+
+FORMS = ("Al2O3-55", "Al2O3-60", "Al2O3-65", "AlN-55", "AlN-60", "AlN-62",
+         "Al2O3-29-AlN-29", "Al2O3-31-AlN-31")
+SCATTER = {"Al2O3": 0.01, "AlN": 0.01, "Al2O3-AlN": 0.01}
+
+
+class _Box:
+    def __init__(self, names, lo, hi):
+        self.names, self.lo, self.hi = list(names), [lo] * len(names), [hi] * len(names)
+
+
+class StandIn:
+    """What the joint posterior reads of a ForwardModel: k falls smoothly with every
+    resistance of the formulation (a two-filler one: both), a shipped-like shared sd."""
+
+    def __init__(self, form: str):
+        self.fractions = fractions_of(form)
+        self.phi = sum(self.fractions.values())
+        self.parameters = [f"R_{f}_silicone" for f in sorted(self.fractions)]
+        self.rb = SimpleNamespace(box_=_Box(self.parameters, 5e-10, 2e-6))
+        self.fixed = {}
+        self.model_sd, self.rve_scatter, self.packing_dof = 0.004, 0.01, (0.003, 8)
+        self.shared_system = "-".join(sorted(self.fractions))
+
+    def predict(self, cols):
+        s = sum(np.log1p(np.asarray(cols[p], float) / 1.5e-8) for p in self.parameters)
+        k = np.atleast_1d(4.5 * self.phi ** 1.5 / (1 + 0.6 * s / len(self.parameters)))
+        return k, 1e-3 * k
+
+    def shared_sd(self, cols):
+        return np.full(max(np.asarray(v).size for v in cols.values()), 0.006)
+
+
+ELASTICITY = {"Al2O3": 0.12, "AlN": 0.02}
+INPUTS = {"k_silicone": InputPrior("k_silicone", 0.18, 0.10),
+          "k_Al2O3": InputPrior("k_Al2O3", 30.0, 0.15),
+          "k_AlN": InputPrior("k_AlN", 200.0, 0.25), "film_nm": FilmPrior()}
+
+
+def _tables():
+    return {f: Tabulated.of(f, StandIn(f), {**{x: ELASTICITY[x] for x in fractions_of(f)},
+                                            "film_nm": -0.008}) for f in FORMS}
+
+
+def _space(tables, **kw):
+    return JointSpace.build(tables, matrix="silicone", resistance=ResistancePrior(),
+                            inputs=kw.pop("inputs", INPUTS),
+                            model_form=kw.pop("model_form", ModelFormPrior()), **kw)
+
+
+def _simulate(lik: JointLikelihood, values: dict[str, float], seed: int,
+              rel_sd: float = 0.015) -> Measurements:
+    """Four replicates per formulation about the likelihood's k at ``values`` (the other
+    parameters at their prior's centre)."""
+    space = lik.space
+    theta = np.array([[values.get(n, 0.0 if k != "uniform" else (a + b) / 2)
+                       for n, k, a, b in zip(space.names, space.kinds, space.a, space.b)]])
+    cols = space.columns(theta)
+    rng = np.random.default_rng(seed)
+    return Measurements({f: lik.conductivities(cols, f)[0][0]
+                         * (1 + rel_sd * rng.standard_normal(4)) for f in FORMS}, "sim")
+
+
+def test_a_table_reproduces_its_model_between_grid_points():
+    for f in ("AlN-60", "Al2O3-29-AlN-29"):
+        model, tab = StandIn(f), _tables()[f]
+        rng = np.random.default_rng(0)
+        x = rng.uniform(-9.2, -5.8, (200, len(model.parameters)))
+        k, rel_err, shared = tab.evaluate(x)
+        want, err = model.predict({p: 10 ** x[:, i] for i, p in enumerate(model.parameters)})
+        np.testing.assert_allclose(k, want, rtol=2e-4 if len(model.parameters) == 2 else 1e-5)
+        np.testing.assert_allclose(rel_err, err / want, rtol=1e-6)
+        np.testing.assert_allclose(shared, 0.006, rtol=1e-12)
+
+
+def test_the_space_holds_every_input_the_shared_terms_and_the_model_form():
+    tables = _tables()
+    space = _space(tables)
+    assert space.names[:2] == ("log10 R_AlN_silicone", "log10 R_Al2O3_silicone") or \
+        set(space.names[:2]) == {"log10 R_AlN_silicone", "log10 R_Al2O3_silicone"}
+    for name in ("ln k_silicone", "ln k_Al2O3", "ln k_AlN", "film_nm", "offset_Al2O3",
+                 "offset_AlN", "offset_Al2O3-AlN", "slope_Al2O3", "slope_Al2O3-AlN"):
+        assert name in space.names
+    assert space.held == {"tau_offset": 0.05, "tau_slope": 0.03}
+    rng = np.random.default_rng(1)
+    draws = space.draw(rng, 20000)
+    lo, hi = ResistancePrior().log10_bounds
+    r = draws[:, space.names.index("log10 R_AlN_silicone")]
+    assert lo <= r.min() and r.max() <= hi
+    km = draws[:, space.names.index("ln k_silicone")]
+    assert km.std() == pytest.approx(0.10, rel=0.03)
+    assert np.all(np.isfinite(space.log_prior(draws)))
+    # a point of the unit cube maps onto the prior (nested sampling's transform)
+    u = rng.uniform(size=(20000, space.dim))
+    v = space.from_unit(u)
+    assert v[:, space.names.index("ln k_AlN")].std() == pytest.approx(0.25, rel=0.03)
+    with pytest.raises(ValueError, match=r"^hold: 'k_silicone' is no parameter"):
+        _space(tables, hold={"k_silicone": 0.2})
+    off = _space(tables, model_form=ModelFormPrior(on=False))
+    assert not any(n.startswith("slope_") for n in off.names)
+    assert "offset_AlN" in off.names   # the shipped correction's shared term stays
+
+
+def test_a_two_filler_prediction_moves_with_the_matrix_conductivity_alone():
+    """Issue 59, point 1: every formulation, the hybrids too, is evaluated at every input
+    value: k_silicone +10 % alone changes a hybrid's k (exactly: lam k_model(lam R), the
+    filler terms to first order)."""
+    tables = _tables()
+    space = _space(tables)
+    lik = JointLikelihood(tables, Measurements({f: np.ones(4) for f in FORMS}, "x"), space,
+                          scatter=SCATTER)
+    theta = np.zeros((2, space.dim))
+    for i, n in enumerate(space.names):
+        if n.startswith("log10"):
+            theta[:, i] = math.log10(2e-8)
+    theta[1, space.names.index("ln k_silicone")] = math.log(1.1)
+    cols = space.columns(theta)
+    k, _ = lik.conductivities(cols, "Al2O3-29-AlN-29")
+    assert k[1] != k[0]
+    model = StandIn("Al2O3-29-AlN-29")
+    base = model.predict({p: np.array([2e-8 * 1.1]) for p in model.parameters})[0][0]
+    filler = (1 / 1.1) ** ELASTICITY["Al2O3"] * (1 / 1.1) ** ELASTICITY["AlN"]
+    assert k[1] == pytest.approx(1.1 * filler * base, rel=3e-4)
+
+
+def test_the_sampler_recovers_the_truth_and_is_seeded():
+    tables = _tables()
+    space = _space(tables)
+    blank = JointLikelihood(tables, Measurements({f: np.ones(4) for f in FORMS}, "x"), space,
+                            scatter=SCATTER)
+    truth = {"log10 R_Al2O3_silicone": math.log10(2.2e-8),
+             "log10 R_AlN_silicone": math.log10(3e-8), "film_nm": 1.0}
+    lik = JointLikelihood(tables, _simulate(blank, truth, seed=3), space, scatter=SCATTER)
+    post = sample(lik, seed=7)
+    assert post.converged and 0.05 < post.acceptance < 0.6
+    for r, t in (("R_Al2O3_silicone", 2.2e-8), ("R_AlN_silicone", 3e-8)):
+        lo, hi = post.interval(r)
+        assert lo < t < hi and lo < post.point(r) < hi
+        assert post.half_width_factor(r) < 3
+    again = sample(lik, seed=7)
+    np.testing.assert_array_equal(post.samples, again.samples)
+    assert sample(lik, seed=8, steps=200, burn=100).samples.shape == (post.walkers * 200,
+                                                                      space.dim)
