@@ -109,3 +109,18 @@ def test_formulations_alone_are_tested_for_agreement():
     assert out["dof"] == 2 and not out["agree"] and out["p"] < 0.01
     agree = alone_agreement(rows[:2])["R"]
     assert agree["agree"] and agree["p"] > 0.5
+
+
+def test_no_error_budget_factor_reaches_beyond_the_priors_width(ident):
+    from itr_identify.reporting.error_budget import error_budget
+
+    lo, hi = ident.posterior.prior
+    width = math.log(hi / lo)
+    budget = error_budget(ident)
+    for p, entry in budget["parameters"].items():
+        for name, factor in entry["factors"].items():
+            if factor is None:
+                continue
+            assert abs(math.log(factor)) <= width, (p, name, factor)
+        for name in entry["beyond_prior"]:
+            assert entry["factors"][name] is None

@@ -36,7 +36,8 @@ because its walkers are evaluated together: the likelihood is vectorised over th
 (every reduced basis tabulated on a grid in log10 R once), so a posterior with tens of
 thousands of effective samples takes seconds, which the 2 % convergence rule on interval
 ends needs; it is seeded and deterministic. The evidence, where a comparison of models needs
-one, comes from dynesty over the same likelihood (:func:`log_evidence`).
+one, comes from importance sampling over the same likelihood with a t proposal fitted to the
+chain (:func:`refine`), whose weights also polish the chain's quantiles.
 """
 
 from __future__ import annotations
