@@ -54,38 +54,96 @@ TARGET_P = 0.01
 TARGET_BIAS = 0.1
 
 
+#: The tabulated forward models, their priors and the replicate noise, kept after the first
+#: build (the build is one identification, minutes; a resumed study reads them; no pickle).
+CACHE = RUNS / "likelihood.npz"
+
+
 def build():
     """The gap identification of Table 3 at the reproduce defaults: its likelihood (tables,
-    space, scatter) and the replicate noise per filler system."""
-    from itr_identify.inference.calibrate import pooled_scatter
-    from itr_identify.inference.formulations import fractions_of
-    from itr_identify.inference.joint import JointLikelihood, JointSpace, Tabulated
+    space, scatter) and the replicate noise per filler system (from :data:`CACHE` where an
+    earlier build left it)."""
     from itr_identify.inference.measurements import read_measurements
-    from itr_identify.inference.pipeline import identify
-    from itr_identify.inference.priors import DEFAULT_MODEL_FORM
+
+    meas = read_measurements()
+    if not CACHE.exists():
+        _build_cache(meas)
+    return _from_cache(meas)
+
+
+def _priors():
+    """The reproduce defaults' input priors over the phases of Table 3."""
+    from itr_identify.inference.formulations import fractions_of
+    from itr_identify.inference.measurements import read_measurements
     from itr_identify.workflows.reproduce import ReproduceSettings
 
     settings = ReproduceSettings()
     meas = read_measurements()
     system = settings.forward.system
     phases = {system.matrix, *(f for n in meas.formulations for f in fractions_of(n, system))}
+    return settings, settings.input_priors(phases)
+
+
+def _build_cache(meas) -> None:
+    from itr_identify.inference.calibrate import pooled_scatter
+    from itr_identify.inference.joint import Tabulated
+    from itr_identify.inference.pipeline import identify
+
+    settings, inputs = _priors()
     ident = identify(meas, "gap", settings=settings.forward, seed=settings.seed,
-                     inputs=settings.input_priors(phases), echo=print)
+                     inputs=inputs, echo=print, floor_check=False)
     tables = {f: Tabulated.of(f, m, ident.inputs["elasticity"].get(f, {}))
               for f, m in ident.models.items()}
     groups: dict[str, list] = {}
     for f, t in tables.items():
         groups.setdefault(t.group, []).append(ident.models[f])
-    space = JointSpace.build(tables, matrix=system.matrix, resistance=ident.resistance_prior,
-                             inputs=ident.priors, model_form=DEFAULT_MODEL_FORM)
-    lik = JointLikelihood(tables, meas, space,
-                          scatter={g: pooled_scatter(ms) for g, ms in groups.items()})
     noise = {}
     for g in groups:
         rel = [np.std(meas.values[f], ddof=1) / np.mean(meas.values[f])
                for f, t in tables.items() if t.group == g]
         noise[g] = float(math.sqrt(np.mean(np.square(rel))))
-    return lik, noise
+    arrays, meta = {}, {"priors": sorted(ident.priors), "matrix": settings.forward.system.matrix,
+                        "resistance": list(ident.posterior.prior), "noise": noise,
+                        "scatter": {g: pooled_scatter(ms) for g, ms in groups.items()},
+                        "tables": {}}
+    for i, (f, t) in enumerate(tables.items()):
+        meta["tables"][f] = {"index": i, "parameters": list(t.parameters),
+                             "fractions": t.fractions, "system": t.system,
+                             "model_sd": t.model_sd, "rve_scatter": t.rve_scatter,
+                             "packing": list(t.packing) if t.packing else None,
+                             "elasticity": t.elasticity, "axes": len(t.axes)}
+        for j, ax in enumerate(t.axes):
+            arrays[f"t{i}_axis{j}"] = ax
+        for key in ("log_k", "rel_err", "shared"):
+            arrays[f"t{i}_{key}"] = np.asarray(getattr(t, key))
+    RUNS.mkdir(parents=True, exist_ok=True)
+    tmp = RUNS / ".likelihood.tmp.npz"
+    np.savez_compressed(tmp, meta=np.array(json.dumps(meta)), **arrays)
+    tmp.replace(CACHE)
+
+
+def _from_cache(meas):
+    from itr_identify.inference.joint import JointLikelihood, JointSpace, Tabulated
+    from itr_identify.inference.priors import DEFAULT_MODEL_FORM, ResistancePrior
+
+    with np.load(CACHE, allow_pickle=False) as z:
+        meta = json.loads(str(z["meta"]))
+        tables = {}
+        for f, m in meta["tables"].items():
+            i = m["index"]
+            tables[f] = Tabulated(
+                f, tuple(m["parameters"]), m["fractions"],
+                tuple(z[f"t{i}_axis{j}"] for j in range(m["axes"])), z[f"t{i}_log_k"],
+                z[f"t{i}_rel_err"], z[f"t{i}_shared"], m["system"], m["model_sd"],
+                m["rve_scatter"], tuple(m["packing"]) if m["packing"] else None,
+                m["elasticity"])
+    _, inputs = _priors()
+    space = JointSpace.build(tables, matrix=meta["matrix"],
+                             resistance=ResistancePrior(*meta["resistance"]),
+                             inputs={n: inputs[n] for n in meta["priors"]},
+                             model_form=DEFAULT_MODEL_FORM)
+    lik = JointLikelihood(tables, meas, space, scatter=meta["scatter"])
+    return lik, meta["noise"]
 
 
 def simulate(lik, noise: dict[str, float], rng: np.random.Generator):

@@ -462,8 +462,12 @@ CHAIN_TAUS = 50
 #: carry a Monte-Carlo error of a few tenths of a per cent of R, and a run twice as long
 #: moves no interval end by more than about 1 %.
 TARGET_DRAWS = 20000
-#: Steps per round of sampling, and the most steps before the sampler says it did not
-#: converge.
+#: Walkers: the likelihood is evaluated for the whole half-ensemble at once, so many walkers
+#: cost little more per step than few, and the draws a step is worth grow with them.
+WALKERS_PER_DIM = 16
+WALKERS_MIN = 64
+#: Steps of the first round (later rounds run what the rule is then expected to need), and
+#: the most steps before the sampler says it did not converge.
 ROUND_STEPS = 2000
 MAX_STEPS = 100000
 
@@ -508,6 +512,10 @@ class JointPosterior:
     log_evidence, log_evidence_se : float
         ``ln Z``, the data's likelihood averaged over the prior, and its Monte-Carlo
         standard error (:func:`refine`).
+    source : str
+        ``chain`` (the chain's draws, equal weights) or ``importance`` (:func:`refine`'s
+        independent draws with their weights, used where they are worth
+        :data:`TARGET_DRAWS`: the chain then only shapes their proposal).
     """
 
     names: tuple[str, ...]
@@ -525,6 +533,7 @@ class JointPosterior:
     effective_draws: float = float("nan")
     log_evidence: float = float("nan")
     log_evidence_se: float = float("nan")
+    source: str = "chain"
 
     def column(self, name: str) -> np.ndarray:
         if name in self.held:
@@ -577,11 +586,12 @@ class JointPosterior:
                             "autocorr_steps": self.autocorr,
                             "effective_draws": self.effective_draws,
                             "log_evidence": self.log_evidence,
-                            "log_evidence_se": self.log_evidence_se}}
+                            "log_evidence_se": self.log_evidence_se,
+                            "draws_from": self.source}}
 
 
 #: Importance draws of :func:`refine`.
-REFINE_DRAWS = 200_000
+REFINE_DRAWS = 400_000
 #: Degrees of freedom and covariance inflation of the refinement's multivariate t, and its
 #: rounds (each refits the proposal on the previous round's weighted draws).
 REFINE_DF = 5
@@ -664,32 +674,41 @@ def _start(likelihood: JointLikelihood, rng: np.random.Generator, walkers: int
 
 
 def sample(likelihood: JointLikelihood, *, seed: int = 0, walkers: int | None = None,
-           steps: int | None = None, burn: int | None = None) -> JointPosterior:
+           steps: int | None = None, burn: int | None = None,
+           progress: bool = False) -> JointPosterior:
     """Sample the posterior of ``likelihood`` (its space's priors) with emcee: ``walkers``
-    (default four per dimension, at least 32) differential-evolution walkers, seeded; by
-    default rounds of :data:`ROUND_STEPS` steps until, after a burn-in of a third of the
-    steps, every parameter's chain spans :data:`CHAIN_TAUS` autocorrelation times and the
-    draws are worth :data:`TARGET_DRAWS` independent ones (walkers x steps over the longest
-    autocorrelation time), at most :data:`MAX_STEPS` (then ``converged`` is False and the
-    caller says so); ``steps``: run exactly that many after ``burn``. The evidence is then
-    estimated by importance sampling from the chain (:func:`refine`)."""
+    (default :data:`WALKERS_PER_DIM` per dimension, at least :data:`WALKERS_MIN`)
+    differential-evolution walkers, seeded; by default a first round of :data:`ROUND_STEPS`
+    steps, then rounds of what the autocorrelation says the rule needs, until, after a
+    burn-in of a third of the steps, every parameter's chain spans :data:`CHAIN_TAUS`
+    autocorrelation times and the draws are worth :data:`TARGET_DRAWS` independent ones
+    (walkers x steps over the longest autocorrelation time), at most :data:`MAX_STEPS`
+    (then ``converged`` is False and the caller says so); ``steps``: run exactly that many
+    after ``burn``. The evidence is then estimated by importance sampling from a t fitted
+    to the chain (:func:`refine`), whose independent weighted draws are the posterior where
+    they are worth :data:`TARGET_DRAWS` (``source``). ``progress``: a bar over the steps
+    whose total is, after each round, the steps the rule is expected to need (so its ETA
+    is the sampler's)."""
     import emcee
+    from tqdm.auto import tqdm
 
     space = likelihood.space
     dim = space.dim
-    walkers = walkers or max(32, 4 * dim + (4 * dim) % 2)
+    walkers = walkers or max(WALKERS_MIN, WALKERS_PER_DIM * dim + dim % 2)
     rng = np.random.default_rng(seed)
     start = _start(likelihood, rng, walkers)
-    sampler = emcee.EnsembleSampler(
-        walkers, dim, likelihood.log_posterior, vectorize=True,
-        moves=[(emcee.moves.DEMove(), 0.8), (emcee.moves.DESnookerMove(), 0.2)])
+    sampler = emcee.EnsembleSampler(walkers, dim, likelihood.log_posterior, vectorize=True,
+                                    moves=[(emcee.moves.DEMove(), 1.0)])
     sampler.random_state = np.random.RandomState(seed).get_state()
-    state, total = start, 0
+    state, total, n = start, 0, ROUND_STEPS
     target = steps + (burn or 0) if steps is not None else None
+    bar = tqdm(total=target or ROUND_STEPS, desc="joint posterior", unit="step",
+               disable=not progress, leave=False)
     while True:
-        n = ROUND_STEPS if target is None else target - total
+        n = n if target is None else target - total
         state = sampler.run_mcmc(state, n, progress=False)
         total += n
+        bar.update(n)
         discard = burn if burn is not None else total // 3
         tau = _autocorr(sampler.get_chain(discard=discard))
         kept = total - discard
@@ -697,12 +716,29 @@ def sample(likelihood: JointLikelihood, *, seed: int = 0, walkers: int | None = 
         converged = bool(np.all(kept >= CHAIN_TAUS * tau) and worth >= TARGET_DRAWS)
         if target is not None or converged or total >= MAX_STEPS:
             break
+        # the steps the rule needs at this autocorrelation (kept is two thirds of the total),
+        # run in one go (each check of the autocorrelation costs a pass over the chain)
+        need = 1.5 * max(CHAIN_TAUS * float(np.max(tau)),
+                         TARGET_DRAWS * float(np.max(tau)) / walkers)
+        n = int(min(MAX_STEPS - total, max(ROUND_STEPS, 1.1 * need - total)))
+        bar.total = total + n
+        bar.set_postfix(tau=f"{np.max(tau):.0f}", worth=f"{worth:.0f}")
+        bar.refresh()
+    bar.close()
     chain = sampler.get_chain(discard=discard, flat=True)
     logp = sampler.get_log_prob(discard=discard, flat=True)
     ll = logp - space.log_prior(chain)
-    _, _, _, ln_z, ln_z_se = refine(likelihood, chain, seed=seed)
-    n = chain.shape[0]
-    return JointPosterior(space.names, chain, np.full(n, 1.0 / n), dict(space.held), ll,
+    x, w, ess, ln_z, ln_z_se = refine(likelihood, chain, seed=seed)
+    weights = np.full(chain.shape[0], 1.0 / chain.shape[0])
+    source = "chain"
+    if target is None and ess >= TARGET_DRAWS:
+        # independent draws that the chain's own need not match: where they are worth the
+        # target, they are the posterior (their error is the weights' effective number)
+        keep = w > 0
+        chain, weights = x[keep], w[keep] / w[keep].sum()
+        ll = likelihood.log_posterior(chain) - space.log_prior(chain)
+        worth, source = ess, "importance"
+    return JointPosterior(space.names, chain, weights, dict(space.held), ll,
                           dict(zip(space.names, map(float, tau))),
                           float(np.mean(sampler.acceptance_fraction)), walkers, kept,
-                          discard, seed, converged, worth, ln_z, ln_z_se)
+                          discard, seed, converged, worth, ln_z, ln_z_se, source)

@@ -26,7 +26,16 @@ import numpy as np
 
 from ..forward.model import ForwardModel
 from .calibrate import Posterior, pooled_scatter
-from .joint import JointLikelihood, JointPosterior, JointSpace, Tabulated, sample
+from .joint import (
+    CHAIN_TAUS,
+    MAX_STEPS,
+    TARGET_DRAWS,
+    JointLikelihood,
+    JointPosterior,
+    JointSpace,
+    Tabulated,
+    sample,
+)
 from .measurements import Measurements
 from .nuisance import FilmPrior, InputPrior
 from .priors import DEFAULT_MODEL_FORM, DEFAULT_RESISTANCE, ModelFormPrior, ResistancePrior
@@ -50,7 +59,8 @@ def run_joint(models: Mapping[str, ForwardModel], measurements: Measurements,
               resistance: ResistancePrior = DEFAULT_RESISTANCE,
               model_form: ModelFormPrior = DEFAULT_MODEL_FORM,
               hold: Mapping[str, float] | None = None, seed: int = 0,
-              steps: int | None = None) -> tuple[JointPosterior, JointLikelihood]:
+              steps: int | None = None, progress: bool = False
+              ) -> tuple[JointPosterior, JointLikelihood]:
     """Sample the joint posterior of ``models`` given ``measurements`` (module notes);
     ``elasticity``: :func:`~.nuisance.elasticities` of the models; ``hold``: parameters
     held at a value; ``steps``: a fixed chain length (default: until converged)."""
@@ -70,7 +80,7 @@ def run_joint(models: Mapping[str, ForwardModel], measurements: Measurements,
         groups.setdefault(t.group, []).append(models[f])
     lik = JointLikelihood(tables, measurements, space,
                           scatter={g: pooled_scatter(ms) for g, ms in groups.items()})
-    return sample(lik, seed=seed, steps=steps, burn=steps), lik
+    return sample(lik, seed=seed, steps=steps, burn=steps, progress=progress), lik
 
 
 def as_posterior(joint: JointPosterior, *, resistance: ResistancePrior,
@@ -219,9 +229,13 @@ def joint_note(joint: JointPosterior) -> str:
     tau = max(joint.autocorr.values())
     return (f"emcee: {joint.walkers} walkers x {joint.steps} steps after {joint.burn} of "
             f"burn-in, longest autocorrelation {tau:.0f} steps, acceptance "
-            f"{joint.acceptance:.2f}" + ("" if joint.converged else
-                                         "; NOT converged (chains shorter than 60 "
-                                         "autocorrelation times)"))
+            f"{joint.acceptance:.2f}; the posterior's draws "
+            + ("importance-weighted from a t fitted to the chain, worth "
+               if joint.source == "importance" else "the chain's, worth ")
+            + f"{joint.effective_draws:.0f} independent draws"
+            + ("" if joint.converged else
+               f"; NOT converged at {MAX_STEPS} steps (the rule: every chain spans "
+               f"{CHAIN_TAUS} autocorrelation times and is worth {TARGET_DRAWS} draws)"))
 
 
 def mark_predictive(rows: list[dict], ident) -> None:

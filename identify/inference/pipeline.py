@@ -281,7 +281,7 @@ def identify(measurements: Measurements, parametrisation: str = "gap", *,
         nominal = post
         elastic = elasticities(models, post.best, film=film) if priors else {}
         jp, _ = run_joint(models, measurements, priors, elastic, resistance=resistance,
-                          model_form=model_form, seed=seed)
+                          model_form=model_form, seed=seed, progress=True)
         post = as_posterior(jp, resistance=resistance, stages=nominal.stages)
         fit = joint_fit_record(models, measurements, post, jp, model_form)
         if floor_check:

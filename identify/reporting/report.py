@@ -12,6 +12,7 @@ from itr_fv.materials.parameters import parse_parameter
 from itr_fv.rve.spec import SEED_STRIDE
 from itr_fv.solvers.choice import solver_choice
 
+from ..inference.joint import CHAIN_TAUS
 from ..inference.measurements import Measurements
 from ..inference.pipeline import Identification
 from .error_budget import error_budget, error_budget_lines
@@ -376,7 +377,8 @@ def joint_lines(idents: Mapping[str, Identification]) -> list[str]:
                   f"{sampler.get('walkers')} walkers, {sampler.get('steps')} steps after "
                   f"{sampler.get('burn')} of burn-in, longest autocorrelation "
                   f"{max(jp.autocorr.values()):.0f} steps, "
-                  + ("converged (every chain spans 60 autocorrelation times)" if jp.converged
+                  + (f"converged (every chain spans {CHAIN_TAUS} autocorrelation times, worth "
+                     f"{jp.effective_draws:.0f} independent draws)" if jp.converged
                      else "NOT converged") + ".",
                   "",
                   f"Priors: each resistance log-uniform over {lo_p:g} - {hi_p:g} m^2 K/W "
