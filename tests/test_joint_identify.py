@@ -124,3 +124,31 @@ def test_no_error_budget_factor_reaches_beyond_the_priors_width(ident):
             assert abs(math.log(factor)) <= width, (p, name, factor)
         for name in entry["beyond_prior"]:
             assert entry["factors"][name] is None
+
+
+def test_the_predictive_interval_is_anchored_by_the_full_solves(ident):
+    """A validation row whose full solves read 10 % above the tables at the point: the
+    interval moves up by the same 10 %; a measured mean at the anchored centre is inside,
+    one 40 % above is not; the interval is at least as wide as the measurement's error."""
+    from itr_identify.inference.joint_fit import mark_predictive
+
+    lik = ident.likelihood()
+    at = np.zeros((1, lik.space.dim))
+    for r in ident.joint.resistances:
+        at[0, lik.space.names.index(f"log10 {r}")] = math.log10(ident.posterior.best[r])
+    f = "Al2O3-60"
+    k_table = float(lik.conductivities(lik.space.columns(at), f)[0][0])
+    se = 0.01 * k_table
+
+    def row(predicted, measured):
+        return {"formulation": f, "predicted": predicted, "measured": measured,
+                "measured_se": se, "replica_k_iso": [predicted] * 3}
+
+    rows = [row(k_table, k_table), row(1.1 * k_table, k_table),
+            row(k_table, 1.4 * k_table)]
+    mark_predictive(rows, ident)
+    (a0, b0), (a1, b1), _ = (r["predictive_90"] for r in rows)
+    assert a1 == pytest.approx(1.1 * a0, rel=0.03) and b1 == pytest.approx(1.1 * b0, rel=0.03)
+    assert b0 - a0 > 2 * 1.645 * se
+    assert a0 < k_table < b0 and rows[0]["inside"]
+    assert not rows[2]["inside"]

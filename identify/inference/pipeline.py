@@ -80,6 +80,16 @@ class Identification:
     nominal: Posterior | None = None
     joint: JointPosterior | None = None
     priors: dict = field(default_factory=dict)
+    model_form: ModelFormPrior = DEFAULT_MODEL_FORM
+
+    def likelihood(self):
+        """The joint posterior's likelihood (:func:`~.joint_fit.likelihood_of` of the
+        models, measurements, priors and elasticities of this identification)."""
+        from .joint_fit import likelihood_of
+
+        return likelihood_of(self.models, self.measurements, self.priors,
+                             self.inputs.get("elasticity", {}),
+                             resistance=self.resistance_prior, model_form=self.model_form)
 
     def leave_one_out(self, *, seed: int = 0) -> list[dict]:
         """Each formulation predicted from the others (the joint posterior without the
@@ -300,7 +310,7 @@ def identify(measurements: Measurements, parametrisation: str = "gap", *,
         seconds["screening"] = time.perf_counter() - t
         return Identification(parametrisation, settings, models, post, screening, seconds,
                               measurements, rounds, fit, inputs_record, alone, nominal, jp,
-                              dict(priors))
+                              dict(priors), model_form)
     post, fit = with_model_form(models, measurements, post, grid_points=grid_points, seed=seed)
     echo(f"  {par.name}: {misfit_note(fit)}")
     inputs_record: dict = {}
