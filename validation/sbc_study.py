@@ -27,7 +27,7 @@ killed run redoes only the missing ones). Writes ``validation/results/sbc.md`` a
 
 Usage::
 
-    python validation/sbc_study.py [--draws 200] [--report-only]
+    python validation/sbc_study.py [--draws 200] [--shard K/N] [--report-only]
 """
 
 from __future__ import annotations
@@ -233,10 +233,14 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--draws", type=int, default=200)
     ap.add_argument("--report-only", action="store_true")
+    ap.add_argument("--shard", default="0/1",
+                    help="K/N: only the draws i with i %% N == K (one process per core)")
     args = ap.parse_args()
+    k, n = (int(x) for x in args.shard.split("/"))
     if not args.report_only:
         RUNS.mkdir(parents=True, exist_ok=True)
-        todo = [i for i in range(args.draws) if not (RUNS / f"draw_{i:03d}.json").exists()]
+        todo = [i for i in range(args.draws) if i % n == k
+                and not (RUNS / f"draw_{i:03d}.json").exists()]
         if todo:
             lik, noise = build()
             for i in todo:

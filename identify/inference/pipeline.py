@@ -104,6 +104,12 @@ class Identification:
         return leave_one_out_joint(jp, lik, seed=seed)
 
     @property
+    def quoted(self) -> dict[str, float]:
+        """The values quoted and validated by full solves, m^2 K/W: the joint posterior's
+        points (medians of ln R) where it ran, else the calibration's at the nominal inputs."""
+        return dict(self.posterior.best if self.joint is not None else self.at_nominal.best)
+
+    @property
     def resistance_prior(self):
         """The joint posterior's resistance prior (its range is the posterior's)."""
         from .priors import ResistancePrior

@@ -187,7 +187,7 @@ def surrogate_check(validation: Mapping[str, list[dict]],
             m = ident.models[row["formulation"]]
             if m.rb is None:
                 continue
-            k, lo, hi = m.first_replica_k({p: ident.at_nominal.best[p] for p in m.parameters})
+            k, lo, hi = m.first_replica_k({p: ident.quoted[p] for p in m.parameters})
             full = row["replica_k_iso_raw"][0]
             out[par].append({"formulation": row["formulation"], "full_solve": full,
                              "reduced_basis": k, "lower": lo, "upper": hi,

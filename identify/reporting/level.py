@@ -30,7 +30,7 @@ def _faithful_solves(ident: Identification) -> int:
 
 def level_record(ident: Identification) -> dict:
     """What set the level of each model of ``ident`` at its best values (module notes)."""
-    models = {f: m.level_at({p: ident.at_nominal.best[p] for p in m.parameters})
+    models = {f: m.level_at({p: ident.quoted[p] for p in m.parameters})
               for f, m in ident.models.items()}
     sources = {r["source"] for r in models.values()}
     rec: dict = {"level": fidelity_name(ident.settings.faithful),

@@ -169,7 +169,27 @@ def table6_lines(validation: Mapping[str, list[dict]]) -> list[str]:
         lines.append("| " + " | ".join(cells) + " |")
     lines += ["", "Mean / max |relative error| (at the level): " + "; ".join(
         f"{p} {np.mean(e):.1f} % / {np.max(e):.1f} %" for p, e in errs.items() if e) + "."]
+    lines += predictive_lines(validation)
     return lines
+
+
+def predictive_lines(validation: Mapping[str, list[dict]]) -> list[str]:
+    """Per parametrisation whose rows carry it, the measured means against the posterior
+    predictive interval anchored by these full solves
+    (:func:`~itr_identify.inference.joint_fit.mark_predictive`)."""
+    out = []
+    for p, rows in validation.items():
+        marked = [r for r in rows if "predictive_90" in r]
+        if not marked:
+            continue
+        out += ["", f"{p}: the measured mean against the 90 % posterior predictive interval "
+                "anchored by these full solves (the draws' inputs and model form move the "
+                "solves' k; the measurement's error, one RVE's scatter and the level's sd "
+                f"added): inside for {sum(r['inside'] for r in marked)} of {len(marked)}; "
+                + ", ".join(f"{r['formulation']} [{r['predictive_90'][0]:.3f}, "
+                            f"{r['predictive_90'][1]:.3f}]" + ("" if r["inside"] else " (out)")
+                            for r in marked) + "."]
+    return out
 
 
 def surrogate_lines(check: Mapping[str, list[dict]]) -> list[str]:

@@ -159,7 +159,7 @@ def _temperature_field(ident: Identification, formulation: str, out: Path) -> li
     from itr_surrogate.engine import RVEData, cached_problem
 
     m = ident.models[formulation]
-    best = {p: ident.at_nominal.best[p] for p in m.parameters}
+    best = {p: ident.quoted[p] for p in m.parameters}
     mat = m.materials(best)
     problem = cached_problem(RVEData.of(m.microstructures[0]), mat.contact)[0]
     with warnings.catch_warnings():
@@ -259,7 +259,7 @@ def _reproduce(settings: ReproduceSettings, out: Path, progress: bool,
          "formulation at the identified values")
     with _bar(n_val, "validation solves", progress) as bar:
         for par, ident in idents.items():
-            point = ident.posterior.best if ident.joint is not None else ident.at_nominal.best
+            point = ident.quoted
             validation[par] = validate(ident.models, point, meas, tick=lambda: bar.update(1))
             if ident.joint is not None:
                 mark_predictive(validation[par], ident)
