@@ -379,7 +379,7 @@ def test_default_identification_applies_the_shipped_corrections_with_their_terms
     rec = level_record(ident)
     assert rec["level"] == "shipped" and rec["faithful_solves_this_run"] == 0
     assert "runtime" not in rec and rec["shipped"]["boxes_um"]["Al2O3"] == 32.0
-    best = ident.at_nominal.best          # the models' level: at their own (nominal) inputs
+    best = ident.quoted                   # the models' level at the values quoted (issue 59)
     for f, r in rec["models"].items():
         m = ident.models[f]
         c = m.shipped.factor({p: np.array([best[p]]) for p in m.parameters}, 1)[0][0]
