@@ -147,7 +147,8 @@ def block(data: dict) -> str:
     """The README's lines, from the recorded figures."""
     r, t = data["reproduce"], data["tests"]
     run = (f"README command 1 (a fresh venv, `pip install .` and `itr reproduce`) "
-           f"{r['wall_s'] / 60:.1f} min in CI (peak memory not measured there)"
+           f"{r['wall_s'] / 60:.1f} min {r.get('where', 'in CI')} (peak memory not measured "
+           "there)"
            if r.get("fresh_install") else
            f"`itr reproduce` {r['wall_s'] / 60:.1f} min and {r['peak_gb']:.2f} GB peak")
     return (f"On {r['machine']} (no GPU, {r['date']}): {run}; it writes "
@@ -164,6 +165,12 @@ def block(data: dict) -> str:
 def _json(name: str) -> dict | None:
     path = RESULTS.parent / name
     return json.loads(path.read_text()) if path.exists() else None
+
+
+def _text(name: str) -> str | None:
+    """The first line of a result file, without its full stop."""
+    path = RESULTS.parent / name
+    return path.read_text().splitlines()[0].rstrip(".") if path.exists() else None
 
 
 def _interval_line(name: str, e: dict) -> str:
@@ -188,12 +195,17 @@ def results_block() -> str:
     ident = _json("reproduce_identified.json")
     if ident:
         h = ident["headline"]
-        fit = h.get("fit", {}).get("gap", {})
+        fit = {**h.get("fit", {}).get("gap", {}), **ident.get("gap", {}).get("fit", {})}
         lofo = {p: ident[p].get("leave_one_out", []) for p in ("gap", "area") if p in ident}
         parts.append(
-            "`itr reproduce` on Table 3 (`validation/results/reproduce.md`, as CI last ran it): "
+            "`itr reproduce` on Table 3 (`validation/results/reproduce.md`, "
+            + (_text("reproduce_wall.txt") or "as CI last ran it") + "): "
             "gap " + "; ".join(_interval_line(n, e) for n, e in h["parameters"]["gap"].items())
-            + (f". The gap fit: chi-square {fit['chi2']:.1f} on {fit['dof']} dof (p "
+            + (f". The gap fit at the quoted values with the stated inputs: chi-square "
+               f"{fit['chi2']:.1f} on {fit['dof']} dof (p {fit['p']:.2g}) without the model "
+               f"form, {fit['chi2_with']:.1f} (p {fit['p_with']:.2g}) with its prior variance"
+               if fit and "chi2_with" in fit else
+               f". The gap fit: chi-square {fit['chi2']:.1f} on {fit['dof']} dof (p "
                f"{fit['p']:.2g}), model-form error {100 * fit['model_form_sd']:.1f} % of k"
                if fit else "")
             + ". Table 6 at the quoted values (full solves, the stated inputs), measured "
@@ -358,6 +370,8 @@ def main() -> None:
                         "(README command 1) instead of running it")
     p.add_argument("--reproduce-out", default=None, metavar="DIR",
                    help="with --reproduce-from: that run's itr-reproduce folder (its sizes)")
+    p.add_argument("--reproduce-where", default="in CI",
+                   help="with --reproduce-from: where that run ran, in words")
     a = p.parse_args()
     data = (measure(a.skip_reproduce or bool(a.reproduce_from),
                     a.skip_tests or bool(a.tests_from))
@@ -365,7 +379,7 @@ def main() -> None:
     if a.reproduce_from:
         data["reproduce"] = {**reproduce_from_log(
             Path(a.reproduce_from), Path(a.reproduce_out) if a.reproduce_out else None),
-            "date": str(date.today()), "machine": _machine()}
+            "date": str(date.today()), "machine": _machine(), "where": a.reproduce_where}
         RESULTS.write_text(json.dumps(data, indent=2) + "\n")
     if a.tests_from:
         data["tests"] = {**tests_from_log(Path(a.tests_from)), "date": str(date.today()),

@@ -52,6 +52,8 @@ RANK_DRAWS = 99
 TARGET_COVERAGE = (0.85, 0.95)
 TARGET_P = 0.01
 TARGET_BIAS = 0.1
+#: Draws the targets are judged on (acceptance 1 of issue 59).
+STUDY_DRAWS = 200
 
 
 #: The tabulated forward models, their priors and the replicate noise, kept after the first
@@ -205,7 +207,10 @@ def report() -> dict:
     lines = ["# Simulation-based calibration of the joint posterior (issue 59)", "",
              " ".join(__doc__.split("\n\n")[1].split()), "",
              f"{len(rows)} draws ({summary['converged']} converged by the sampler's rule; "
-             f"{summary['seconds_per_draw']:.0f} s of sampling per draw on 2 cores).", "",
+             f"{summary['seconds_per_draw']:.0f} s of sampling per draw on 2 cores)"
+             + (f"; INTERIM: {len(rows)} of the {STUDY_DRAWS} draws the targets are judged on "
+                "(the study resumes where it stopped)" if len(rows) < STUDY_DRAWS else "")
+             + ".", "",
              "| resistance | coverage of the 90 % interval | rank uniformity (chi-square, 10 "
              "bins) | median ln(point / truth) | targets |", "|---|---|---|---|---|"]
     for r in rows[0]["parameters"]:
