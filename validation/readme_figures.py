@@ -167,6 +167,10 @@ def _json(name: str) -> dict | None:
     return json.loads(path.read_text()) if path.exists() else None
 
 
+#: The truths of validation/input_recovery_study.py (ten noise seeds each).
+RECOVERY_TRUTHS = 6
+
+
 def _text(name: str) -> str | None:
     """The first line of a result file, without its full stop."""
     path = RESULTS.parent / name
@@ -264,7 +268,12 @@ def results_block() -> str:
                      + ("input_recovery_joint.md`, the joint posterior" if joint else
                         "input_recovery.md`, the earlier marginalisation")
                      + "; 90 % intervals holding the truth over noise seeds, the geometric "
-                     "mean of the best values): " + "; ".join(rows) + ".")
+                     "mean of the best values"
+                     + ("; INTERIM, the study resumes where it stopped" if joint and (
+                         len(rec) < RECOVERY_TRUTHS or any(
+                             d["seeds"] < 10 for t in rec.values()
+                             for d in t["parameters"].values())) else "")
+                     + "): " + "; ".join(rows) + ".")
     return " ".join(parts) + " Written by `validation/readme_figures.py` from those files."
 
 
