@@ -144,14 +144,20 @@ def test_a_two_filler_prediction_moves_with_the_matrix_conductivity_alone():
     assert k[1] == pytest.approx(1.1 * filler * base, rel=3e-4)
 
 
-def test_the_sampler_recovers_the_truth_and_is_seeded():
+def _simulated_likelihood(r_al2o3: float, *, seed: int) -> JointLikelihood:
+    """The likelihood of a table simulated at R_Al2O3 ``r_al2o3`` (m^2 K/W), R_AlN 3e-8 and
+    a 1 nm film."""
     tables = _tables()
     space = _space(tables)
     blank = JointLikelihood(tables, Measurements({f: np.ones(4) for f in FORMS}, "x"), space,
                             scatter=SCATTER)
-    truth = {"log10 R_Al2O3_silicone": math.log10(2.2e-8),
+    truth = {"log10 R_Al2O3_silicone": math.log10(r_al2o3),
              "log10 R_AlN_silicone": math.log10(3e-8), "film_nm": 1.0}
-    lik = JointLikelihood(tables, _simulate(blank, truth, seed=3), space, scatter=SCATTER)
+    return JointLikelihood(tables, _simulate(blank, truth, seed=seed), space, scatter=SCATTER)
+
+
+def test_the_sampler_recovers_the_truth_and_is_seeded():
+    lik = _simulated_likelihood(2.2e-8, seed=3)
     post = sample(lik, seed=7)
     assert post.converged and 0.05 < post.acceptance < 0.6
     for r, t in (("R_Al2O3_silicone", 2.2e-8), ("R_AlN_silicone", 3e-8)):
@@ -161,7 +167,7 @@ def test_the_sampler_recovers_the_truth_and_is_seeded():
     again = sample(lik, seed=7)
     np.testing.assert_array_equal(post.samples, again.samples)
     assert sample(lik, seed=8, steps=200, burn=100).samples.shape == (post.walkers * 200,
-                                                                      space.dim)
+                                                                      lik.space.dim)
 
 
 @pytest.mark.slow       # a chain four times the default: minutes on 2 cores
@@ -171,13 +177,7 @@ def test_conditional_quantiles_agree_with_a_long_chains_and_are_steadier():
     less than two seeds of the counted ones at the low end (where the likelihood is flat)."""
     from itr_identify.inference import joint
 
-    tables = _tables()
-    space = _space(tables)
-    blank = JointLikelihood(tables, Measurements({f: np.ones(4) for f in FORMS}, "x"), space,
-                            scatter=SCATTER)
-    truth = {"log10 R_Al2O3_silicone": math.log10(4e-9),
-             "log10 R_AlN_silicone": math.log10(3e-8), "film_nm": 1.0}
-    lik = JointLikelihood(tables, _simulate(blank, truth, seed=5), space, scatter=SCATTER)
+    lik = _simulated_likelihood(4e-9, seed=5)
     name = "log10 R_Al2O3_silicone"
     a, b = (sample(lik, seed=s) for s in (1, 2))
     long = sample(lik, seed=3, steps=4 * a.steps, burn=a.burn)
