@@ -181,9 +181,11 @@ def test_conditional_quantiles_agree_with_a_long_chains_and_are_steadier():
     name = "log10 R_Al2O3_silicone"
     a, b = (sample(lik, seed=s) for s in (1, 2))
     long = sample(lik, seed=3, steps=4 * a.steps, burn=a.burn)
-    ref = long.quantile(name, [0.05, 0.5, 0.95])
-    rb = [joint.conditional_interval(lik, p, name, seed=s) for p, s in ((a, 1), (b, 2))]
+    q = [0.05, 0.5, 0.95]
+    ref = joint.weighted_quantile(long.column(name), q, long.weights)
+    rb = [joint.marginal_of(lik, p, name, seed=s).quantile(q) for p, s in ((a, 1), (b, 2))]
     for r in rb:
         np.testing.assert_allclose(r, ref, atol=0.03)        # log10: 7 % in R
-    counted = [p.quantile(name, [0.05])[0] for p in (a, b)]
+    np.testing.assert_allclose(a.quantile(name, q), a.marginals[name].quantile(q))
+    counted = [joint.weighted_quantile(p.column(name), [0.05], p.weights)[0] for p in (a, b)]
     assert abs(rb[0][0] - rb[1][0]) <= abs(counted[0] - counted[1]) + 0.005

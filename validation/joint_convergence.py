@@ -5,7 +5,9 @@ are sampled at the default length (the chain worth :data:`~itr_identify.inferenc
 TARGET_DRAWS` independent draws), with another seed, and at twice the length; per
 resistance the point and the 90 % interval's ends, and how far doubling moved each. Target
 (fixed before the run): no interval end moves by more than 2 %. Also the evidence (its
-importance-sampling estimate) with its standard error.
+importance-sampling estimate) with its standard error. Points and interval ends are read, as
+the package quotes them, from the resistances' Rao-Blackwell marginals
+(``itr_identify.inference.marginal``).
 
 Writes ``validation/results/joint_convergence.md`` and ``.json``.
 

@@ -49,6 +49,7 @@ import numpy as np
 from scipy.special import gammaln
 
 from ..forward.model import ForwardModel
+from .marginal import Marginal
 from .measurements import Measurements
 
 __all__ = ["Stage", "StageResult", "Posterior", "stages_of", "calibrate", "pooled_scatter",
@@ -235,6 +236,11 @@ class Posterior:
         Log of the data's likelihood averaged over the prior, summed over the stages (a
         stage with no parameter of its own: its likelihood at the best values); what
         :mod:`itr_identify.inference.nuisance` weighs inputs by.
+    weighted : (ndarray, ndarray), optional
+        A joint posterior's weighted draws (log10 values, weights).
+    marginals : dict, optional
+        Per flat name its Rao-Blackwell marginal of log10 R (:mod:`.marginal`), which the
+        median and interval read where present.
     """
 
     names: list[str]
@@ -245,8 +251,18 @@ class Posterior:
     model_form_sd: float = 0.0
     log_evidence: float = 0.0
     weighted: tuple[np.ndarray, np.ndarray] | None = None
+    marginals: dict[str, Marginal] | None = None
+
+    def _marginal_quantiles(self, name: str, q) -> np.ndarray | None:
+        """Quantiles of log10 ``name`` from its Rao-Blackwell marginal, where it has one."""
+        if self.marginals and name in self.marginals:
+            return self.marginals[name].quantile(q)
+        return None
 
     def median(self, name: str) -> float:
+        m = self._marginal_quantiles(name, 0.5)
+        if m is not None:
+            return float(10 ** m)
         if self.weighted is not None:
             x, w = self.weighted
             return float(10 ** _weighted_quantile(x[:, self.names.index(name)], 0.5, w))
@@ -257,13 +273,16 @@ class Posterior:
         value (:func:`credible_interval`), so ``lo <= best[name] <= hi`` always; from the
         weighted draws where the posterior has them (:attr:`weighted`: a joint posterior's
         importance draws, log10 values and weights; :attr:`samples` are then draws by
-        weight, for what needs equal-weight draws)."""
+        weight, for what needs equal-weight draws), from the Rao-Blackwell marginal where
+        it has one (:attr:`marginals`, log10 scale)."""
         best = self.best.get(name)
-        if self.weighted is not None:
-            x, w = self.weighted
-            a = (1 - level) / 2
-            lo, hi = (float(v) for v in _weighted_quantile(x[:, self.names.index(name)],
-                                                           [a, 1 - a], w))
+        a = (1 - level) / 2
+        m = self._marginal_quantiles(name, [a, 1 - a])
+        if m is not None or self.weighted is not None:
+            if m is None:
+                x, w = self.weighted
+                m = _weighted_quantile(x[:, self.names.index(name)], [a, 1 - a], w)
+            lo, hi = (float(v) for v in m)
             lo, hi = float(10 ** lo), float(10 ** hi)
             return ((min(lo, best), max(hi, best)) if best is not None else (lo, hi))
         x = self.samples[:, self.names.index(name)]

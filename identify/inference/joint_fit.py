@@ -86,13 +86,15 @@ def run_joint(models: Mapping[str, ForwardModel], measurements: Measurements,
               resistance: ResistancePrior = DEFAULT_RESISTANCE,
               model_form: ModelFormPrior = DEFAULT_MODEL_FORM,
               hold: Mapping[str, float] | None = None, seed: int = 0,
-              steps: int | None = None, progress: bool = False
+              steps: int | None = None, progress: bool = False, marginals: bool = True
               ) -> tuple[JointPosterior, JointLikelihood]:
     """Sample the joint posterior of ``models`` given ``measurements`` (:func:`likelihood_of`);
-    ``steps``: a fixed chain length (default: until converged)."""
+    ``steps``: a fixed chain length (default: until converged); ``marginals``: attach the
+    resistances' Rao-Blackwell marginals (:func:`~.joint.sample`)."""
     lik = likelihood_of(models, measurements, inputs, elasticity, resistance=resistance,
                         model_form=model_form, hold=hold)
-    return sample(lik, seed=seed, steps=steps, burn=steps, progress=progress), lik
+    return sample(lik, seed=seed, steps=steps, burn=steps, progress=progress,
+                  marginals=marginals), lik
 
 
 def as_posterior(joint: JointPosterior, *, resistance: ResistancePrior,
@@ -106,7 +108,9 @@ def as_posterior(joint: JointPosterior, *, resistance: ResistancePrior,
     rows = joint.resample(draws, seed=joint.seed)
     return Posterior(list(names), full[rows], {n: joint.point(n) for n in names},
                      (resistance.low, resistance.high), stages=list(stages),
-                     log_evidence=joint.log_evidence, weighted=(full, joint.weights))
+                     log_evidence=joint.log_evidence, weighted=(full, joint.weights),
+                     marginals={n: joint.marginals[f"log10 {n}"] for n in names
+                                if f"log10 {n}" in joint.marginals} or None)
 
 
 #: Equal-weight draws (by weight) that the records below read.
@@ -374,11 +378,14 @@ def floor_sensitivity(joint: JointPosterior, models: Mapping[str, ForwardModel],
     low = resistance.with_floor(resistance.low / 10)
     jp, _ = run_joint(models, measurements, inputs, elasticity, resistance=low,
                       model_form=model_form, seed=seed, steps=FLOOR_STEPS)
-    out[f"floor {low.low:g}"] = {n: _summary(jp.column(f"log10 {n}"), jp.weights)
-                                 for n in names}
-    out[f"floor {resistance.low:g} (the prior)"] = {
-        n: _summary(joint.column(f"log10 {n}"), joint.weights) for n in names}
+    out[f"floor {low.low:g}"] = {n: _quoted(jp, n) for n in names}
+    out[f"floor {resistance.low:g} (the prior)"] = {n: _quoted(joint, n) for n in names}
     return out
+
+
+def _quoted(joint: JointPosterior, name: str) -> dict[str, Any]:
+    """A resistance's point and 90 % interval as the posterior quotes them."""
+    return {"point": joint.point(name), "interval_90": list(joint.interval(name))}
 
 
 def _summary(x: np.ndarray, w: np.ndarray) -> dict[str, Any]:

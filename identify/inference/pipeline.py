@@ -100,7 +100,8 @@ class Identification:
         jp, lik = run_joint(self.models, self.measurements, self.priors,
                             self.inputs.get("elasticity", {}),
                             resistance=self.resistance_prior,
-                            model_form=ModelFormPrior(on=False), seed=seed)
+                            model_form=ModelFormPrior(on=False), seed=seed,
+                            marginals=False)
         return leave_one_out_joint(jp, lik, seed=seed)
 
     @property

@@ -358,7 +358,8 @@ def headline(idents: Mapping[str, Identification]) -> dict:
                       "flag": flags[p][n], "unit": "m^2 K/W",
                       "half_width_factor": math.sqrt(i.posterior.interval(n)[1]
                                                      / i.posterior.interval(n)[0]),
-                      "best_is": ("the posterior median of ln R" if i.joint is not None
+                      "best_is": ("the posterior median of ln R (Rao-Blackwell marginal)"
+                                  if i.joint is not None
                                   else "the marginal posterior's central point")}
                   for n in i.posterior.names} for p, i in idents.items()}
     for p, i in idents.items():

@@ -407,7 +407,9 @@ def joint_lines(idents: Mapping[str, Identification]) -> list[str]:
                   "one offset (the shipped correction's shared term and the model form's "
                   f"offset, sd {100 * mf.get('offset_sd', 0):g} %) and a slope in the fraction "
                   f"(sd {100 * mf.get('slope_sd_per_5_vol_pct', 0):g} % per 5 vol%). The point "
-                  "quoted is the posterior median of ln R; the intervals are equal-tailed.",
+                  "quoted is the posterior median of ln R; the intervals are equal-tailed; both "
+                  "read from each resistance's Rao-Blackwell marginal (the average of its "
+                  "exact conditional densities over the posterior's draws).",
                   "",
                   f"The fit's test at the points quoted with the stated inputs: chi-square "
                   f"{fit['chi2']:.1f} on {fit['dof']} dof (p {fit['p']:.2g}) without the "
