@@ -70,8 +70,14 @@ def test_the_posterior_is_the_joint_ones_with_its_point_and_record(ident):
         assert (lo, hi) == pytest.approx(jp.interval(r), rel=2e-3)
     assert ident.posterior.prior == (1e-9, 1e-6)
     fit = ident.fit
-    assert fit["dof"] == len(FORMS) - 2 and 0 <= fit["p"] <= 1
-    assert fit["chi2_with"] <= fit["chi2"]         # the model form's variance only adds
+    stated = fit["stated"]
+    assert stated["dof"] == len(FORMS) - 2 and 0 <= stated["p"] <= 1
+    assert stated["chi2_with"] <= stated["chi2"]   # the model form's variance only adds
+    # the test: inputs free, film uniform (a flat-prior parameter like the resistances)
+    free = fit["free_inputs"]
+    assert fit["dof"] == free["dof"] == len(FORMS) - 3 and fit["p"] == free["p"]
+    assert fit["misfit"] == (free["p"] < fit["threshold_p"])
+    assert free["chi2"] == pytest.approx(free["chi2_data"] + free["chi2_inputs"])
     for key in ("ln k_silicone", "ln k_Al2O3", "ln k_AlN", "film_nm", "offset_Al2O3"):
         assert key in jp.names
     shares = ident.inputs["parameters"]["R_AlN_silicone"]["shares"]
@@ -152,3 +158,19 @@ def test_the_predictive_interval_is_anchored_by_the_full_solves(ident):
     assert b0 - a0 > 2 * 1.645 * se
     assert a0 < k_table < b0 and rows[0]["inside"]
     assert not rows[2]["inside"]
+
+
+def test_every_inference_has_the_one_resistance_prior(ident):
+    """The grid calibration at the nominal inputs and each formulation fitted alone search
+    the joint posterior's resistance prior (1e-9 - 1e-6 by default), not the reduced bases'
+    wider box (5e-10 - 2e-6): a value at the nominal inputs never lies outside the prior."""
+    rp = ident.resistance_prior
+    box = ident.settings.prior_m2K_per_W
+    assert box[0] < rp.low and rp.high < box[1]
+    assert ident.posterior.prior == pytest.approx((rp.low, rp.high))
+    assert ident.at_nominal.prior == pytest.approx((rp.low, rp.high))
+    for n in ident.at_nominal.names:
+        lo, hi = ident.at_nominal.interval(n)
+        assert rp.low * 0.999 <= lo <= ident.at_nominal.best[n] <= hi <= rp.high * 1.001
+    for row in ident.alone:
+        assert rp.low * 0.999 <= row["interval_90"][0] <= row["interval_90"][1] <= rp.high * 1.001

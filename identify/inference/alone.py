@@ -24,18 +24,20 @@ def _only(measurements: Measurements, name: str) -> Measurements:
 
 
 def fit_alone(models: Mapping[str, ForwardModel], measurements: Measurements, *,
-              grid_points: int = 121, seed: int = 0) -> list[dict]:
+              grid_points: int = 121, seed: int = 0,
+              prior: tuple[float, float] | None = None) -> list[dict]:
     """Per single-filler formulation with one parameter: ``formulation``, ``parameter``,
     ``fraction`` (filler volume fraction), ``best``, ``interval_90`` (m^2 K/W) and
     ``determination``; formulations with more parameters than one are left out (one
-    measured mean cannot determine two)."""
+    measured mean cannot determine two); ``prior``: the resistance prior's range, m^2 K/W
+    (default: the models' box; :func:`~.calibrate.calibrate`)."""
     rows = []
     for name, m in models.items():
         if len(m.fractions) != 1 or len(m.parameters) != 1:
             continue
         (p,) = m.parameters
         post = calibrate({name: m}, _only(measurements, name), grid_points=grid_points,
-                         seed=seed)
+                         seed=seed, prior=prior)
         rows.append({"formulation": name, "parameter": p,
                      "fraction": float(sum(m.fractions.values())), "best": post.best[p],
                      "interval_90": list(post.interval(p)),

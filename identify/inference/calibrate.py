@@ -537,7 +537,8 @@ def _statement(post: "Posterior", names: Sequence[str], directions: Sequence[dic
 
 def calibrate(models: Mapping[str, ForwardModel], measurements: Measurements, *,
               grid_points: int = 121, carried_samples: int = 256, n_samples: int = 4000,
-              seed: int = 0, model_form_sd: float = 0.0) -> Posterior:
+              seed: int = 0, model_form_sd: float = 0.0,
+              prior: tuple[float, float] | None = None) -> Posterior:
     """Posterior of the interface parameters of ``models`` given ``measurements``.
 
     Parameters
@@ -556,6 +557,11 @@ def calibrate(models: Mapping[str, ForwardModel], measurements: Measurements, *,
     model_form_sd : float
         Relative model-form error added to every formulation's likelihood variance (>= 0;
         :mod:`itr_identify.inference.model_form` chooses it).
+    prior : (float, float), optional
+        The log-uniform prior's range of every resistance, m^2 K/W, inside the models'
+        reduced-basis box (``settings.prior_m2K_per_W``; default: that box). The
+        identification passes its resistance prior (:mod:`.priors`), the one the joint
+        posterior has.
 
     Returns
     -------
@@ -573,7 +579,11 @@ def calibrate(models: Mapping[str, ForwardModel], measurements: Measurements, *,
     if not isinstance(grid_points, int) or grid_points < 5:
         raise ValueError(f"grid_points: expected a whole number >= 5, got {grid_points!r}")
     rng = np.random.default_rng(seed)
-    prior = next(iter(models.values())).settings.prior_m2K_per_W
+    box = tuple(next(iter(models.values())).settings.prior_m2K_per_W)
+    prior = box if prior is None else (float(prior[0]), float(prior[1]))
+    if not (box[0] * (1 - 1e-12) <= prior[0] < prior[1] <= box[1] * (1 + 1e-12)):
+        raise ValueError(f"prior: {prior[0]:g} - {prior[1]:g} m^2 K/W must lie inside the "
+                         f"models' reduced-basis box {box[0]:g} - {box[1]:g}")
     names: list[str] = []
     samples = np.zeros((n_samples, 0))
     best: dict[str, float] = {}

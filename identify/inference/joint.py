@@ -446,6 +446,15 @@ class JointLikelihood:
         return log_likelihood(self._mean - k, v, self._se ** 2, self._n,
                               estimated=((self._pack * k) ** 2, self._dof))
 
+    def chi_square_terms(self, theta: np.ndarray) -> np.ndarray:
+        """Each formulation's Gaussian chi-square term, (F, N) in :attr:`order`: the squared
+        residual of the measured mean over the likelihood's variance plus the pooled
+        packing variance (what :meth:`terms` counts, without the Student t's tails)."""
+        cols = self.space.columns(np.atleast_2d(theta))
+        k, err = self.conductivities_all(cols)
+        v = variance(self._se, k, err, self._scatter, self._model_sd) + (self._pack * k) ** 2
+        return (self._mean - k) ** 2 / v
+
     def per_formulation(self, theta: np.ndarray) -> dict[str, np.ndarray]:
         """Each formulation's log-likelihood term (N,) at the points ``theta`` (N, D)."""
         return dict(zip(self.order, self.terms(theta)))

@@ -208,12 +208,15 @@ def inputs_record(joint: JointPosterior, nominal: Posterior,
 
 def joint_fit_record(models: Mapping[str, ForwardModel], measurements: Measurements,
                      post: Posterior, joint: JointPosterior,
-                     model_form: ModelFormPrior) -> dict:
-    """The fit's test at the points quoted with the stated inputs: the chi-square without
-    the model form (``chi2``, ``dof``, ``p``, ``misfit`` below
-    :data:`~.model_form.MISFIT_P`) and with its prior variance (``chi2_with``: each
-    formulation's variance plus ``(tau_offset^2 + (tau_slope z)^2) k^2``); the model
-    form's posterior offsets and slopes per filler system (medians, relative)."""
+                     model_form: ModelFormPrior, free: Mapping[str, Any]) -> dict:
+    """The fit's test and its record. The test (``chi2``, ``dof``, ``p``, ``misfit`` below
+    :data:`~.model_form.MISFIT_P`) is ``free``'s: the model without the model form at its
+    highest-posterior point, the inputs free within their priors
+    (:func:`~.free_inputs_fit.fit_with_inputs_free`). Beside it, ``stated``: the chi-square
+    at the points quoted with the stated inputs, without the model form and with its prior
+    variance (``chi2_with``: each formulation's variance plus ``(tau_offset^2 + (tau_slope
+    z)^2) k^2``); and the model form's posterior offsets and slopes per filler system
+    (medians, relative)."""
     from .calibrate import residuals
     from .model_form import MISFIT_P, chi_square_p
 
@@ -228,16 +231,18 @@ def joint_fit_record(models: Mapping[str, ForwardModel], measurements: Measureme
         extra = (model_form.offset_scale ** 2 + (model_form.slope_scale * z) ** 2
                  if model_form.on else 0.0)
         with_mf += (m - k) ** 2 / (v + extra * k ** 2)
-    p = chi_square_p(chi2, dof)
     structure = {n: float(joint.quantile(n, 0.5)) for n in joint.names
                  if n.startswith(("offset_", "slope_"))}
-    return {"chi2": chi2, "dof": dof, "p": p, "misfit": p < MISFIT_P,
-            "threshold_p": MISFIT_P, "chi2_with": float(with_mf),
-            "p_with": chi_square_p(with_mf, dof), "model_form": {
+    stated = {"chi2": chi2, "dof": dof, "p": chi_square_p(chi2, dof),
+              "chi2_with": float(with_mf), "p_with": chi_square_p(with_mf, dof),
+              "at": "the points quoted, the stated inputs"}
+    return {"chi2": free["chi2"], "dof": free["dof"], "p": free["p"],
+            "misfit": free["p"] < MISFIT_P, "threshold_p": MISFIT_P,
+            "free_inputs": dict(free), "stated": stated, "model_form": {
                 "on": model_form.on, "offset_sd": model_form.offset_scale,
                 "slope_sd_per_5_vol_pct": model_form.slope_scale,
                 "posterior_medians": structure},
-            "model_form_sd": 0.0, "at": "the points quoted, the stated inputs"}
+            "model_form_sd": 0.0, "at": free["what"]}
 
 
 def joint_note(joint: JointPosterior) -> str:

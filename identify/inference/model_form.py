@@ -107,15 +107,23 @@ def misfit_note(record: Mapping) -> str:
             f"{record['p']:.2g}")
     mf = record.get("model_form")
     if isinstance(mf, Mapping):   # the joint posterior's structured model form
+        free, st = record["free_inputs"], record["stated"]
+        test = (f"chi-square {record['chi2']:.1f} on {record['dof']} dof with the inputs free "
+                f"within their priors and no model form (data {free['chi2_data']:.1f}, "
+                f"inputs {free['chi2_inputs']:.1f}), p = {record['p']:.2g}")
+        stated = (f"; at the points quoted with the stated inputs chi-square "
+                  f"{st['chi2']:.1f} on {st['dof']} dof"
+                  + (f", {st['chi2_with']:.1f} with the model form's prior variance"
+                     if mf.get("on") else ""))
         carried = (f"; the intervals carry the structured model-form term (per filler "
                    f"system an offset, sd {100 * mf['offset_sd']:g} %, and a slope, sd "
-                   f"{100 * mf['slope_sd_per_5_vol_pct']:g} % per 5 vol%; chi-square with "
-                   f"it {record['chi2_with']:.1f})" if mf.get("on") else "")
+                   f"{100 * mf['slope_sd_per_5_vol_pct']:g} % per 5 vol%)"
+                   if mf.get("on") else "")
         if not record.get("misfit"):
-            return f"the fit passes its chi-square test ({test}){carried}"
+            return f"the fit passes its chi-square test ({test}){stated}{carried}"
         return (f"the fit fails its chi-square test ({test} < {record['threshold_p']:g}): "
-                f"the model misses the data by more than every stated error{carried}; "
-                "flag 'model misfit'")
+                f"the model misses the data by more than every stated error{stated}"
+                f"{carried}; flag 'model misfit'")
     if not record.get("misfit"):
         return f"the fit passes its chi-square test ({test})"
     return (f"the fit fails its chi-square test ({test} < {record['threshold_p']:g}): the "

@@ -22,6 +22,7 @@ import time
 from collections.abc import Callable, Mapping
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -32,6 +33,7 @@ from ..forward.model import PARAMETRISATIONS, ForwardModel, ForwardSettings
 from .alone import fit_alone
 from .calibrate import Posterior, calibrate
 from .formulations import fractions_of
+from .free_inputs_fit import fit_with_inputs_free
 from .joint import JointPosterior
 from .joint_fit import (
     alone_agreement,
@@ -39,6 +41,7 @@ from .joint_fit import (
     floor_sensitivity,
     joint_fit_record,
     joint_note,
+    likelihood_of,
     run_joint,
 )
 from .joint_fit import inputs_record as inputs_record_of
@@ -216,7 +219,7 @@ def identify(measurements: Measurements, parametrisation: str = "gap", *,
                          f"{parametrisation!r}")
     settings = settings or ForwardSettings()
     lo, hi = settings.prior_m2K_per_W
-    if joint and not (lo <= resistance.low and resistance.high <= hi):
+    if not (lo <= resistance.low and resistance.high <= hi):
         raise ValueError(f"resistance: the prior {resistance.low:g} - {resistance.high:g} "
                          f"m^2 K/W reaches beyond the reduced bases' box {lo:g} - {hi:g} "
                          "(settings.prior_m2K_per_W)")
@@ -232,6 +235,10 @@ def identify(measurements: Measurements, parametrisation: str = "gap", *,
         if inputs is None else inputs, contact=par.contact, settings=settings)
     film = any(isinstance(p, FilmPrior) for p in priors.values())
     rounds: list[dict] = []
+    # every grid calibration (at the nominal inputs, alone, per input node) over the one
+    # resistance prior that the joint posterior also has
+    cal = {"grid_points": grid_points, "seed": seed,
+           "prior": (resistance.low, resistance.high)}
     t0 = time.perf_counter()
     models: dict[str, ForwardModel] = {}
     todo = {}
@@ -252,13 +259,13 @@ def identify(measurements: Measurements, parametrisation: str = "gap", *,
     if singles:
         echo(f"  {par.name}: calibration of {counted(len(singles), 'single-filler formulation')}"
              ", replicas solved at the best point")
-    post = _anchored(models, singles, measurements, grid_points, seed) if singles else None
+    post = _anchored(models, singles, measurements, cal) if singles else None
     seconds["single-filler calibration and anchors"] = time.perf_counter() - t
     if post is not None and faithful is not None:
         t = time.perf_counter()
         echo(f"  {par.name}: faithful corrections of the single-filler models ({faithful.name})")
         post = _corrected(models, _runtime(models, singles, echo), measurements, post,
-                          faithful, grid_points, seed, rounds, echo)
+                          faithful, cal, rounds, echo)
         seconds["single-filler faithful corrections"] = time.perf_counter() - t
     t = time.perf_counter()
     central = post.central() if post is not None else {}
@@ -278,15 +285,15 @@ def identify(measurements: Measurements, parametrisation: str = "gap", *,
         if fixed_of[f]:
             models[f].carried_scatter = _carried_scatter(models[f], post, seed)
     if any(models[f].rb is not None for f in multis):
-        post = _anchored(models, multis, measurements, grid_points, seed)
+        post = _anchored(models, multis, measurements, cal)
     elif multis or post is None:
-        post = calibrate(models, measurements, grid_points=grid_points, seed=seed)
+        post = calibrate(models, measurements, **cal)
     seconds["two-filler models, anchors and final calibration"] = time.perf_counter() - t
     if multis and faithful is not None:
         t = time.perf_counter()
         echo(f"  {par.name}: faithful corrections of the two-filler models ({faithful.name})")
         post = _corrected(models, _runtime(models, multis, echo), measurements, post,
-                          faithful, grid_points, seed, rounds, echo)
+                          faithful, cal, rounds, echo)
         seconds["two-filler faithful corrections"] = time.perf_counter() - t
     if joint:
         t = time.perf_counter()
@@ -300,7 +307,10 @@ def identify(measurements: Measurements, parametrisation: str = "gap", *,
         jp, _ = run_joint(models, measurements, priors, elastic, resistance=resistance,
                           model_form=model_form, seed=seed, progress=True)
         post = as_posterior(jp, resistance=resistance, stages=nominal.stages)
-        fit = joint_fit_record(models, measurements, post, jp, model_form)
+        free = fit_with_inputs_free(
+            likelihood_of(models, measurements, priors, elastic, resistance=resistance,
+                          model_form=ModelFormPrior(on=False)), seed=seed)
+        fit = joint_fit_record(models, measurements, post, jp, model_form, free)
         if floor_check:
             fit["floor_sensitivity"] = floor_sensitivity(
                 jp, models, measurements, priors, elastic, resistance=resistance,
@@ -309,7 +319,7 @@ def identify(measurements: Measurements, parametrisation: str = "gap", *,
                          "elasticity": elastic, "sampler": jp.summary()["sampler"]}
         echo(f"  {par.name}: {joint_note(jp)}; {misfit_note(fit)}")
         seconds["joint posterior"] = time.perf_counter() - t
-        alone = fit_alone(models, measurements, grid_points=grid_points, seed=seed)
+        alone = fit_alone(models, measurements, **cal)
         fit["alone_agreement"] = alone_agreement(alone)
         t = time.perf_counter()
         echo(f"  {par.name}: the paper's screening (Eq. 4 on its grid)")
@@ -318,7 +328,7 @@ def identify(measurements: Measurements, parametrisation: str = "gap", *,
         return Identification(parametrisation, settings, models, post, screening, seconds,
                               measurements, rounds, fit, inputs_record, alone, nominal, jp,
                               dict(priors), model_form)
-    post, fit = with_model_form(models, measurements, post, grid_points=grid_points, seed=seed)
+    post, fit = with_model_form(models, measurements, post, **cal)
     echo(f"  {par.name}: {misfit_note(fit)}")
     inputs_record: dict = {}
     nominal = post
@@ -329,11 +339,10 @@ def identify(measurements: Measurements, parametrisation: str = "gap", *,
              + " and formulation for its elasticity)")
         elastic = elasticities(models, post.best, film=film)
         post, inputs_record = marginalise(models, measurements, post, priors,
-                                          elasticity=elastic, grid_points=grid_points,
-                                          seed=seed)
+                                          elasticity=elastic, **cal)
         inputs_record["elasticity"] = elastic
         seconds["conductivities marginalised"] = time.perf_counter() - t
-    alone = fit_alone(models, measurements, grid_points=grid_points, seed=seed)
+    alone = fit_alone(models, measurements, **cal)
     t = time.perf_counter()
     echo(f"  {par.name}: the paper's screening (Eq. 4 on its grid)")
     screening = hierarchical_screen(models, measurements)
@@ -391,14 +400,15 @@ def _runtime(models: dict[str, ForwardModel], names: list[str], echo: Callable) 
 
 
 def _anchored(models: dict[str, ForwardModel], names: list[str], measurements: Measurements,
-              grid_points: int, seed: int) -> Posterior:
-    """Calibrate ``models``, solve every replica of ``names`` at the best values
-    (:meth:`ForwardModel.anchor_at`: the replica factor and RVE scatter there, not at the
-    box centre) and calibrate again; returns the second posterior."""
-    post = calibrate(models, measurements, grid_points=grid_points, seed=seed)
+              cal: Mapping[str, Any]) -> Posterior:
+    """Calibrate ``models`` (:func:`calibrate` with ``cal``: grid points, seed, prior),
+    solve every replica of ``names`` at the best values (:meth:`ForwardModel.anchor_at`:
+    the replica factor and RVE scatter there, not at the box centre) and calibrate again;
+    returns the second posterior."""
+    post = calibrate(models, measurements, **cal)
     for f in names:
         models[f].anchor_at(post.best)
-    return calibrate(models, measurements, grid_points=grid_points, seed=seed)
+    return calibrate(models, measurements, **cal)
 
 
 def _moves(before: Posterior, after: Posterior, names: list[str]) -> dict[str, float]:
@@ -413,7 +423,7 @@ def _moves(before: Posterior, after: Posterior, names: list[str]) -> dict[str, f
 
 
 def _corrected(models: dict[str, ForwardModel], names: list[str], measurements: Measurements,
-               post: Posterior, faithful, grid_points: int, seed: int, rounds: list[dict],
+               post: Posterior, faithful, cal: Mapping[str, Any], rounds: list[dict],
                echo: Callable[[str], None]) -> Posterior:
     """Correct the models ``names`` on faithful RVEs at the best point and calibrate again,
     until the best value of every parameter they identify moves less than
@@ -429,7 +439,7 @@ def _corrected(models: dict[str, ForwardModel], names: list[str], measurements: 
         own = sorted({p for f in todo for p in models[f].parameters})
         for f in todo:
             models[f].correct_at(post.best, faithful)
-        new = calibrate(models, measurements, grid_points=grid_points, seed=seed)
+        new = calibrate(models, measurements, **cal)
         moves = _moves(post, new, own)
         rounds.append({"round": r, "formulations": list(todo),
                        "at": {p: post.best[p] for p in own},

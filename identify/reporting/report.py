@@ -12,6 +12,7 @@ from itr_fv.materials.parameters import parse_parameter
 from itr_fv.rve.spec import SEED_STRIDE
 from itr_fv.solvers.choice import solver_choice
 
+from ..inference.free_inputs_fit import describe as describe_free
 from ..inference.joint import CHAIN_TAUS
 from ..inference.measurements import Measurements
 from ..inference.pipeline import Identification
@@ -354,8 +355,10 @@ def settings_lines(idents: Mapping[str, Identification], extra: Mapping[str, obj
                 "and holds one)")
              + f" (0 = in contact through the two interface resistances alone, at every "
              f"particle size), Table 1 read as {s.psd_basis}-weighted (`--psd-basis`)",
-             f"- prior: log-uniform {s.prior_m2K_per_W[0]:g} - {s.prior_m2K_per_W[1]:g} "
-             "m^2 K/W for every resistance; screening grid 1e-8 - 1e-5 (the paper's)",
+             f"- prior: log-uniform {ident.posterior.prior[0]:g} - "
+             f"{ident.posterior.prior[1]:g} m^2 K/W for every resistance in every inference "
+             f"(the reduced bases span {s.prior_m2K_per_W[0]:g} - {s.prior_m2K_per_W[1]:g}); "
+             "screening grid 1e-8 - 1e-5 (the paper's)",
              f"- reduced basis: relative bound gap {s.rb_tol:g}, at most {s.rb_max_solves} "
              f"full solves; full solves by the solver {s.solver!r} "
              f"({solver_choice(s.solver).summary or s.solver}) at relative residual "
@@ -411,9 +414,11 @@ def joint_lines(idents: Mapping[str, Identification]) -> list[str]:
                   "read from each resistance's Rao-Blackwell marginal (the average of its "
                   "exact conditional densities over the posterior's draws).",
                   "",
-                  f"The fit's test at the points quoted with the stated inputs: chi-square "
-                  f"{fit['chi2']:.1f} on {fit['dof']} dof (p {fit['p']:.2g}) without the "
-                  f"model form, {fit['chi2_with']:.1f} (p {fit['p_with']:.2g}) with its prior "
+                  f"The fit's test: {describe_free(fit['free_inputs'])}. At the points quoted "
+                  f"with the stated inputs: chi-square {fit['stated']['chi2']:.1f} on "
+                  f"{fit['stated']['dof']} dof (p {fit['stated']['p']:.2g}) without the "
+                  f"model form, {fit['stated']['chi2_with']:.1f} (p "
+                  f"{fit['stated']['p_with']:.2g}) with its prior "
                   "variance. The model form's posterior medians: " + ", ".join(
                       f"{k} {100 * v * (mf.get('offset_sd') if k.startswith('offset') else mf.get('slope_sd_per_5_vol_pct', 0)):+.1f} %"  # noqa: E501
                       for k, v in mf.get("posterior_medians", {}).items()) + ".", "",

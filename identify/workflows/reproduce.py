@@ -276,7 +276,8 @@ def _reproduce(settings: ReproduceSettings, out: Path, progress: bool,
                     bar.update(len(ident.models))
                     continue
                 lofo[par] = leave_one_out(ident.models, meas, grid_points=settings.grid_points,
-                                          seed=settings.seed, tick=lambda: bar.update(1))
+                                          seed=settings.seed, prior=ident.posterior.prior,
+                                          tick=lambda: bar.update(1))
     t_lofo = time.perf_counter() - t
     echo("figures and fields")
     files, psd_fits = _figures(idents, validation, out)
