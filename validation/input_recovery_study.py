@@ -224,7 +224,10 @@ def report() -> None:
               f"cover it and the geometric mean of best / truth lies within {BEST_RANGE[0]}-"
               f"{BEST_RANGE[1]}. The identification is the joint posterior "
               "(`itr_identify.inference.joint`); the best value is the posterior median of "
-              "ln R. The issue-47 run of the earlier machinery is `input_recovery.md`.", ""]
+              "ln R, read with the interval from the resistance's Rao-Blackwell marginal; the "
+              "chi-square column is the fit's test with the inputs free within their priors "
+              "(`itr_identify.inference.free_inputs_fit`). The issue-47 run of the earlier "
+              "machinery is `input_recovery.md`.", ""]
     for name, t in s.items():
         lines += [f"## {name}", "", t["what"] + ".", "",
                   "| formulation | truth k_iso (W/mK) |", "|---|---|"]
