@@ -226,7 +226,11 @@ def results_block() -> str:
     if sbc and sbc.get("parameters"):
         parts.append(
             f"Simulation-based calibration (`sbc.md`, {sbc['draws']} draws from the priors, "
-            "Table 3's replicate noise): " + "; ".join(
+            "Table 3's replicate noise"
+            + (f"; INTERIM, {sbc['draws']} of the {sbc['study_draws']} draws the targets are "
+               "judged on, the study resumes where it stopped"
+               if sbc["draws"] < sbc.get("study_draws", 0) else "")
+            + "): " + "; ".join(
                 f"{r} coverage of the 90 % interval {d['coverage']:.2f}, rank uniformity p "
                 f"{d['rank_p']:.2f}, median ln(point / truth) {d['median_log_error']:+.3f}"
                 for r, d in sbc["parameters"].items()) + ".")

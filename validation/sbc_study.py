@@ -205,7 +205,8 @@ def report() -> dict:
     rows = [json.loads(p.read_text()) for p in sorted(RUNS.glob("draw_*.json"))]
     if not rows:
         return {}
-    summary = {"draws": len(rows), "converged": sum(r["converged"] for r in rows),
+    summary = {"draws": len(rows), "study_draws": STUDY_DRAWS,
+               "converged": sum(r["converged"] for r in rows),
                "seconds_per_draw": float(np.mean([r["seconds"] for r in rows])),
                "parameters": {}}
     lines = ["# Simulation-based calibration of the joint posterior (issue 59)", "",
