@@ -52,8 +52,8 @@ def _maximum(likelihood: JointLikelihood, seed: int) -> np.ndarray:
 
     for x0 in draws[np.argsort(lp)[::-1][:STARTS]]:
         res = minimize(neg, x0, method="Nelder-Mead",
-                       options={"maxiter": 20000, "maxfev": 20000, "xatol": 1e-6,
-                                "fatol": 1e-9, "adaptive": True})
+                       options={"maxiter": 40000, "maxfev": 40000, "xatol": 1e-10,
+                                "fatol": 1e-13, "adaptive": True})
         if -res.fun > best_val:
             best, best_val = res.x, -res.fun
     return best

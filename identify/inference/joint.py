@@ -599,6 +599,14 @@ class JointPosterior:
         return np.minimum(np.searchsorted(c, (rng.uniform() + np.arange(n)) / n),
                           len(c) - 1)
 
+    def counted_rows(self, n: int, seed: int = 0) -> np.ndarray:
+        """About ``n`` row indices by weight, each row ``floor(n w + u)`` times (``u``
+        uniform per row, seeded): unlike :meth:`resample`, a change of the weights by
+        rounding (another solver's tables) leaves the rows as they are."""
+        u = np.random.default_rng(seed).uniform(size=self.weights.size)
+        counts = np.floor(n * self.weights / self.weights.sum() + u).astype(int)
+        return np.repeat(np.arange(self.weights.size), counts)
+
     def summary(self) -> dict[str, Any]:
         """Per resistance its point, interval and F; the sampler's diagnostics."""
         return {"parameters": {r: {"point": self.point(r), "interval_90": self.interval(r),
@@ -621,8 +629,8 @@ class JointPosterior:
 def marginal_of(likelihood: JointLikelihood, posterior: JointPosterior, name: str, *,
                 draws: int = MARGINAL_DRAWS, grid: int = MARGINAL_GRID,
                 seed: int = 0) -> Marginal:
-    """The Rao-Blackwell marginal of sampled parameter ``name`` (:mod:`.marginal`): ``draws``
-    of the posterior by weight (seeded), at each the exact conditional density over
+    """The Rao-Blackwell marginal of sampled parameter ``name`` (:mod:`.marginal`): about
+    ``draws`` of the posterior by weight (seeded), at each the exact conditional density over
     ``grid`` points of ``name``'s prior range (a normal's: +-8 sd; a half-normal's:
     0-8 scale), averaged."""
     sp = likelihood.space
@@ -632,9 +640,15 @@ def marginal_of(likelihood: JointLikelihood, posterior: JointPosterior, name: st
     lo, hi = ((sp.a[j], sp.b[j]) if sp.kinds[j] == "uniform" else
               (sp.a[j] - 8 * sp.b[j], sp.a[j] + 8 * sp.b[j]) if sp.kinds[j] == "normal" else
               (0.0, 8 * sp.b[j]))
-    theta = posterior.samples[posterior.resample(draws, seed=seed)]
-    return rao_blackwell(likelihood.log_posterior, theta, j, lo=float(lo), hi=float(hi),
-                         grid=grid)
+    # each draw counted floor(draws w + u) times, u uniform per draw (seeded): as many
+    # draws as asked on average, each by its weight, and a count that a change of the
+    # weights by rounding (another solver's tables, 1e-9) leaves as it is; a systematic
+    # resampling would move a draw across its cut and the quantiles by 1e-4
+    u = np.random.default_rng(seed).uniform(size=posterior.weights.size)
+    counts = np.floor(draws * posterior.weights / posterior.weights.sum() + u)
+    keep = counts > 0
+    return rao_blackwell(likelihood.log_posterior, posterior.samples[keep], j,
+                         lo=float(lo), hi=float(hi), grid=grid, counts=counts[keep])
 
 
 def with_marginals(likelihood: JointLikelihood, posterior: JointPosterior

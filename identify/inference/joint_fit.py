@@ -118,7 +118,7 @@ RECORD_DRAWS = 20000
 
 
 def _rows(joint: JointPosterior) -> np.ndarray:
-    return joint.resample(RECORD_DRAWS, seed=joint.seed + 1)
+    return joint.counted_rows(RECORD_DRAWS, seed=joint.seed + 1)
 
 
 def _input_columns(joint: JointPosterior, rows: np.ndarray) -> dict[str, np.ndarray]:

@@ -85,7 +85,8 @@ class Marginal:
 
 
 def rao_blackwell(log_posterior: Callable[[np.ndarray], np.ndarray], theta: np.ndarray,
-                  column: int, *, lo: float, hi: float, grid: int = GRID) -> Marginal:
+                  column: int, *, lo: float, hi: float, grid: int = GRID,
+                  counts: np.ndarray | None = None) -> Marginal:
     """The marginal of parameter ``column`` as the average of its conditional densities.
 
     Parameters
@@ -93,7 +94,9 @@ def rao_blackwell(log_posterior: Callable[[np.ndarray], np.ndarray], theta: np.n
     log_posterior : callable
         (N, D) points to (N,) unnormalised log posterior (vectorised).
     theta : ndarray
-        (M, D) equal-weight posterior draws; each gives one conditional density.
+        (M, D) posterior draws; each gives one conditional density.
+    counts : ndarray, optional
+        (M,) how many times each draw counts (equal by default).
     column : int
         The parameter's column in ``theta``.
     lo, hi : float
@@ -110,6 +113,9 @@ def rao_blackwell(log_posterior: Callable[[np.ndarray], np.ndarray], theta: np.n
         raise ValueError("column: not a column of theta (M, D)")
     if not (np.isfinite(lo) and np.isfinite(hi) and hi > lo):
         raise ValueError(f"lo, hi: need finite lo < hi, got {lo}, {hi}")
+    c = np.ones(theta.shape[0]) if counts is None else np.asarray(counts, float)
+    if c.shape != (theta.shape[0],) or np.any(c < 0) or not c.sum() > 0:
+        raise ValueError("counts: one non-negative count per draw, not all zero")
     x = np.linspace(lo, hi, grid)
     rows = max(1, CHUNK // grid)              # draws whose grids make one call
     total = np.zeros(grid)
@@ -119,5 +125,5 @@ def rao_blackwell(log_posterior: Callable[[np.ndarray], np.ndarray], theta: np.n
         lp = np.asarray(log_posterior(pts), float).reshape(-1, grid)
         dens = np.exp(lp - lp.max(axis=1, keepdims=True))
         mass = np.sum(0.5 * (dens[:, 1:] + dens[:, :-1]) * np.diff(x), axis=1)
-        total += (dens / mass[:, None]).sum(axis=0)
-    return Marginal(x, total / theta.shape[0])
+        total += c[i:i + rows] @ (dens / mass[:, None])
+    return Marginal(x, total / c.sum())
