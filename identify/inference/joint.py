@@ -599,13 +599,16 @@ class JointPosterior:
         return np.minimum(np.searchsorted(c, (rng.uniform() + np.arange(n)) / n),
                           len(c) - 1)
 
-    def counted_rows(self, n: int, seed: int = 0) -> np.ndarray:
-        """About ``n`` row indices by weight, each row ``floor(n w + u)`` times (``u``
-        uniform per row, seeded): unlike :meth:`resample`, a change of the weights by
-        rounding (another solver's tables) leaves the rows as they are."""
+    def counts(self, n: int, seed: int = 0) -> np.ndarray:
+        """How often each row counts in about ``n`` draws by weight: ``floor(n w + u)``
+        (``u`` uniform per row, seeded). Unlike :meth:`resample`, a change of the weights
+        by rounding (another solver's tables) leaves the counts as they are."""
         u = np.random.default_rng(seed).uniform(size=self.weights.size)
-        counts = np.floor(n * self.weights / self.weights.sum() + u).astype(int)
-        return np.repeat(np.arange(self.weights.size), counts)
+        return np.floor(n * self.weights / self.weights.sum() + u).astype(int)
+
+    def counted_rows(self, n: int, seed: int = 0) -> np.ndarray:
+        """About ``n`` row indices by weight, each row :meth:`counts` times."""
+        return np.repeat(np.arange(self.weights.size), self.counts(n, seed))
 
     def summary(self) -> dict[str, Any]:
         """Per resistance its point, interval and F; the sampler's diagnostics."""
@@ -644,8 +647,7 @@ def marginal_of(likelihood: JointLikelihood, posterior: JointPosterior, name: st
     # draws as asked on average, each by its weight, and a count that a change of the
     # weights by rounding (another solver's tables, 1e-9) leaves as it is; a systematic
     # resampling would move a draw across its cut and the quantiles by 1e-4
-    u = np.random.default_rng(seed).uniform(size=posterior.weights.size)
-    counts = np.floor(draws * posterior.weights / posterior.weights.sum() + u)
+    counts = posterior.counts(draws, seed=seed)
     keep = counts > 0
     return rao_blackwell(likelihood.log_posterior, posterior.samples[keep], j,
                          lo=float(lo), hi=float(hi), grid=grid, counts=counts[keep])
