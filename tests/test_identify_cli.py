@@ -201,3 +201,30 @@ def test_reproduce_end_to_end_at_tiny_size(tmp_path):
     # the snapshot fields left the store at the end of the run (rows stay)
     assert not list((out / "solves" / "fields").glob("*.npz"))
     assert "snapshot fields removed" in manifest["inputs"]["store_fields"]
+
+
+def test_identify_with_an_effect_and_the_verdict_writes_them_beside_the_base(tmp_path, capsys):
+    """``--discrepancy --effect tester``: the verdict over the library on the gap
+    identification's own model and the identification with the tester's contact beside
+    the base model, in the report, identified.json and a residual figure."""
+    csv = write(tmp_path / "m.csv", "formulation,replicate,k_W_per_mK\n"
+                "Al2O3-55,1,1.29\nAl2O3-55,2,1.30\nAl2O3-55,3,1.22\n"
+                "Al2O3-62,1,1.70\nAl2O3-62,2,1.75\nAl2O3-62,3,1.66\n"
+                "AlN-55,1,1.50\nAlN-55,2,1.46\nAlN-55,3,1.55\n")
+    out = tmp_path / "out"
+    assert main(["identify", csv, "--out", str(out), "--parametrisation", "gap",
+                 "--discrepancy", "--effect", "tester", *TINY]) == 0
+    data = json.loads((out / "identified.json").read_text())
+    d = data["discrepancy"]
+    assert d["verdict"]["verdict"] in ("none", "named", "tie", "unexplained")
+    assert [c["key"] for c in d["verdict"]["candidates"]] == [
+        "matrix", "filler", "porosity", "fraction", "spots", "tester", "batch", "film"]
+    fit = d["effect_fit"]
+    assert fit["effect"]["key"] == "tester" and fit["base"]["key"] == "base"
+    lo, hi = fit["effect"]["value"][1:]
+    assert 0.0 <= lo <= hi <= 1e-4
+    assert set(fit["residuals"]) == {"Al2O3-55", "Al2O3-62", "AlN-55"}
+    report = (out / "report.md").read_text()
+    assert "## Discrepancy" in report and "### With tester contact resistance" in report
+    assert (out / "effect_residuals.png").stat().st_size > 1000
+    assert "discrepancy: " in capsys.readouterr().out

@@ -336,6 +336,15 @@ def identification_arguments(p: argparse.ArgumentParser) -> None:
                    "marginalised in the intervals (defaults: the material system's; the "
                    "paper's silicone 0.10, Al2O3 0.15, AlN 0.25; e.g. silicone=0.02 for a "
                    "measured matrix, 0 to hold it at its nominal value); repeat per phase")
+    p.add_argument("--discrepancy", action="store_true",
+                   help="run the discrepancy verdict on the gap identification's own model: "
+                   "the library's eight effects as terms of its joint posterior, base and "
+                   "candidates without the model-form term (ratio solves on its first "
+                   "replicas; report section Discrepancy)")
+    p.add_argument("--effect", default=None, metavar="NAME",
+                   help="fit this effect's parameters jointly with the resistances, beside "
+                   "the base model (matrix, filler, porosity, fraction, spots, tester, batch, "
+                   "film; default: the one the verdict names)")
     engine_arguments(p)
     p.add_argument("--no-progress", action="store_true", help="no progress bars")
 
@@ -362,6 +371,7 @@ def conductivity_sds(args: argparse.Namespace, system) -> dict[str, float]:
 
 def reproduce_settings(args: argparse.Namespace):
     """The ReproduceSettings of ``itr reproduce`` and ``itr identify`` from their flags."""
+    from ..discrepancy.joint_effects import JOINT_EFFECTS
     from ..workflows.reproduce import DEFAULT_FIDELITY, ReproduceSettings
 
     base = ReproduceSettings.at_fidelity(args.fidelity or DEFAULT_FIDELITY,
@@ -372,9 +382,18 @@ def reproduce_settings(args: argparse.Namespace):
         fw = fw.with_(faithful=_with_corrections(fw, corrections))
     pars = ("area", "gap") if args.parametrisation == "both" else (args.parametrisation,)
     sds = conductivity_sds(args, fw.system)
+    effect = getattr(args, "effect", None)
+    if effect is not None and effect not in JOINT_EFFECTS:
+        raise CLIError(f"--effect: unknown effect {effect!r} (known: "
+                       f"{', '.join(JOINT_EFFECTS)})", 2)
+    if (effect or getattr(args, "discrepancy", False)) and "gap" not in pars:
+        raise CLIError("--effect, --discrepancy: fitted on the gap identification; use "
+                       "--parametrisation gap or both", 2)
     return ReproduceSettings(forward=fw, parametrisations=pars,
                              leave_one_out=not getattr(args, "no_leave_one_out", False),
-                             conductivity_sd=tuple(sorted(sds.items())))
+                             conductivity_sd=tuple(sorted(sds.items())),
+                             discrepancy=bool(getattr(args, "discrepancy", False)),
+                             effect=effect)
 
 
 def _with_corrections(fw, path: str):

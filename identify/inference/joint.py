@@ -57,6 +57,7 @@ from scipy import special
 
 from ..forward.model import ForwardModel
 from .calibrate import log_likelihood, variance
+from .effect_terms import BoundEffect, JointEffect
 from .marginal import DRAWS as MARGINAL_DRAWS
 from .marginal import GRID as MARGINAL_GRID
 from .marginal import Marginal, rao_blackwell
@@ -66,7 +67,8 @@ from .priors import ModelFormPrior, ResistancePrior
 
 __all__ = ["Tabulated", "JointSpace", "JointLikelihood", "JointPosterior", "sample", "refine",
            "marginal_of", "with_marginals",
-           "weighted_quantile",
+           "weighted_quantile", "density_data", "DENSITY_MODEL_SD",
+           "thickness_series",
            "TABLE_POINTS_1D", "TABLE_POINTS_2D", "FRACTION_UNIT"]
 
 #: Grid points of a one-parameter forward model's table over its reduced basis's box.
@@ -221,17 +223,19 @@ class JointSpace:
     held: dict[str, float]
     groups: dict[str, tuple[str, float]]
     matrix: str
+    effect: JointEffect | None = None
 
     @classmethod
     def build(cls, tables: Mapping[str, Tabulated], *, matrix: str,
               resistance: ResistancePrior, inputs: Mapping[str, InputPrior | FilmPrior],
-              model_form: ModelFormPrior, hold: Mapping[str, float] | None = None
-              ) -> JointSpace:
+              model_form: ModelFormPrior, hold: Mapping[str, float] | None = None,
+              effect: JointEffect | None = None) -> JointSpace:
         """The space of ``tables`` (module notes): their resistances over ``resistance``,
         the ``inputs`` with a non-zero sd (a film only where the tables carry its
         elasticity), one shared term per shipped system, and the model form per filler
         system where ``model_form.on``; ``hold`` fixes any of them (log10 R values for a
-        resistance)."""
+        resistance); ``effect``: a candidate effect's parameters added, or the prior of
+        the input it frees widened (:mod:`.effect_terms`)."""
         lo, hi = resistance.log10_bounds
         spec: list[tuple[str, str, float, float]] = []
         for p in sorted({p for t in tables.values() for p in t.parameters}):
@@ -243,6 +247,10 @@ class JointSpace:
                     spec.append(("film_nm", "uniform", pr.low_nm, pr.high_nm))
             elif pr.rel_sd > 0:
                 spec.append((f"ln {pr.name}", "normal", 0.0, pr.rel_sd))
+        if effect is not None:
+            replaced, added = effect.space_entries({s[0]: s[1:] for s in spec})
+            spec = [(s[0], *replaced[s[0]]) if s[0] in replaced else s for s in spec]
+            spec += added
         groups = _groups(tables)
         stated: dict[str, float] = {}
         if model_form.on and model_form.hyper:
@@ -267,7 +275,8 @@ class JointSpace:
         if not spec:
             raise ValueError("hold: every parameter is held; nothing to sample")
         return cls(tuple(s[0] for s in spec), tuple(s[1] for s in spec),
-                   tuple(s[2] for s in spec), tuple(s[3] for s in spec), held, groups, matrix)
+                   tuple(s[2] for s in spec), tuple(s[3] for s in spec), held, groups, matrix,
+                   effect)
 
     @property
     def dim(self) -> int:
@@ -329,13 +338,85 @@ def _groups(tables: Mapping[str, Tabulated]) -> dict[str, tuple[str, float]]:
                 / FRACTION_UNIT) for f, t in tables.items()}
 
 
+#: Relative sd of a predicted sample density given the stated phase densities (ideal mixing;
+#: the coupling agent's 4 vol% of the matrix at about 1.0 g/cm^3 moves a 60 vol% composite by
+#: 0.05 %), added to the measured mean's standard error.
+DENSITY_MODEL_SD = 0.001
+
+
+def density_data(measurements: Measurements, tables: Mapping[str, Tabulated],
+                 densities: Mapping[str, float] | None, matrix: str
+                 ) -> dict[str, tuple[float, float, float, float]]:
+    """Per single-filler formulation with a density column: (mean density, its standard
+    error from the replicate scatter pooled over the filler's formulations, the filler's
+    and the matrix's densities), g/cm^3; empty without the column or the densities."""
+    col = "density_g_per_cm3"
+    if densities is None or col not in measurements.auxiliary_columns:
+        return {}
+    rows = {}
+    for f, t in tables.items():
+        v = measurements.auxiliary_of(col, f)
+        if len(t.fractions) != 1 or v is None or not np.isfinite(v).any():
+            continue
+        v = v[np.isfinite(v)]
+        rows[f] = (next(iter(t.fractions)), v)
+    out = {}
+    for filler in sorted({r[0] for r in rows.values()}):
+        mine = {f: v for f, (fl, v) in rows.items() if fl == filler}
+        dof = sum(v.size - 1 for v in mine.values())
+        if dof < 1:
+            raise ValueError(f"measurements: the density of {filler} needs two samples of "
+                             "one formulation at least (its replicate scatter is its noise)")
+        sd = math.sqrt(sum(float(((v / v.mean() - 1) ** 2).sum()) for v in mine.values())
+                       / dof)
+        for f, v in mine.items():
+            out[f] = (float(v.mean()), sd * float(v.mean()) / math.sqrt(v.size),
+                      float(densities[filler]), float(densities[matrix]))
+    return out
+
+
+def thickness_series(measurements: Measurements, order: list[str]
+                     ) -> dict[str, tuple[np.ndarray, np.ndarray, np.ndarray]]:
+    """Per formulation measured at two thicknesses or more: (thicknesses m, the mean k at
+    each, its standard error from the replicate scatter pooled over the formulation's
+    thicknesses), thinnest first."""
+    out = {}
+    for f in order:
+        t = (measurements.thickness_m or {}).get(f)
+        if t is None:
+            continue
+        t = np.asarray(t, dtype=float)
+        v = np.asarray(measurements.values[f], dtype=float)
+        levels = np.unique(t)
+        if levels.size < 2:
+            continue
+        groups = [v[t == x] for x in levels]
+        dof = sum(g.size - 1 for g in groups)
+        if dof < 1:
+            continue
+        sd = math.sqrt(sum(float(((g - g.mean()) ** 2).sum()) for g in groups) / dof)
+        out[f] = (levels, np.array([g.mean() for g in groups]),
+                  np.array([sd / math.sqrt(g.size) for g in groups]))
+    return out
+
+
+def _inverse_thickness(measurements: Measurements, order: list[str]) -> dict[str, float]:
+    """Per formulation the mean of 1 / thickness of its samples, 1/m (where stated)."""
+    if not measurements.thickness_m:
+        return {}
+    return {f: float(np.mean(1.0 / np.asarray(measurements.thickness_m[f], dtype=float)))
+            for f in order if f in measurements.thickness_m}
+
+
 class JointLikelihood:
     """The log likelihood of the measured means at points of a :class:`JointSpace`,
     vectorised over the points and the formulations (module notes; the tables of one shape
     are stacked and interpolated together)."""
 
     def __init__(self, tables: Mapping[str, Tabulated], measurements: Measurements,
-                 space: JointSpace, *, scatter: Mapping[str, float]) -> None:
+                 space: JointSpace, *, scatter: Mapping[str, float],
+                 densities: Mapping[str, float] | None = None,
+                 matrix_conductivity: float | None = None) -> None:
         missing = sorted(set(tables) - set(measurements.formulations))
         if missing:
             raise ValueError(f"measurements: no measured values for {missing[0]!r}")
@@ -344,7 +425,19 @@ class JointLikelihood:
         self.scatter = dict(scatter)
         self.data = {f: (measurements.mean(f), measurements.standard_error(f),
                          measurements.values[f].size) for f in tables}
+        self.density = density_data(measurements, tables, densities, space.matrix)
+        self.series = thickness_series(measurements, list(tables))
         self._prepare()
+        self.bound: BoundEffect | None = None
+        if space.effect is not None:
+            if matrix_conductivity is None:
+                raise ValueError("matrix_conductivity: an effect's terms need the matrix's "
+                                 "nominal conductivity, W/(m K)")
+            self.bound = space.effect.bind(
+                self.order, {f: t.fractions for f, t in self.tables.items()},
+                {f: t.parameters for f, t in self.tables.items()},
+                matrix_conductivity=matrix_conductivity,
+                inverse_thickness=_inverse_thickness(measurements, self.order))
 
     def _prepare(self) -> None:
         tabs = list(self.tables.values())
@@ -378,14 +471,14 @@ class JointLikelihood:
 
     def _interp(self, stack, cols: Mapping[str, np.ndarray], shift: np.ndarray):
         idx, dim, axes, params, log_k, rel_err, shared = stack
-        n = shift.size
+        n = shift.shape[-1]
         if dim == 0:
             return tuple(np.repeat(a.reshape(-1, 1), n, axis=1) for a in (log_k, rel_err,
                                                                            shared))
         rows = np.arange(len(idx))[:, None]
         where = []
         for d, ax in enumerate(axes):
-            x = np.stack([cols[f"log10 {p[d]}"] for p in params]) + shift[None, :]
+            x = np.stack([cols[f"log10 {p[d]}"] for p in params]) + shift
             t = np.clip((x - ax[0]) / (ax[1] - ax[0]), 0.0, ax.size - 1 - 1e-9)
             i = np.floor(t).astype(int)
             where.append((i, t - i))
@@ -401,19 +494,35 @@ class JointLikelihood:
     def conductivities_all(self, cols: Mapping[str, np.ndarray]
                            ) -> tuple[np.ndarray, np.ndarray]:
         """(k, error bound), each (F, N) in :attr:`order`, at the parameter ``cols``, W/(m K),
-        with the shared correction term and the model form applied."""
+        with the shared correction term, the model form and a candidate effect applied."""
+        k, err, _ = self._evaluate(cols)
+        return k, err
+
+    def _evaluate(self, cols: Mapping[str, np.ndarray]
+                  ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(k, error bound, the effect's relative variance), each (F, N)."""
         n = next(iter(cols.values())).size
         zeros = np.zeros(n)
-        ln_lam = cols.get(f"ln k_{self.space.matrix}", zeros)
         F = len(self.order)
+        bound = self.bound
+        ln_lam = np.repeat(cols.get(f"ln k_{self.space.matrix}", zeros)[None, :], F, axis=0)
+        if bound is not None:
+            ln_lam = ln_lam + bound.ln_matrix_shift(cols, n)
         log_k, rel_err, shared = (np.empty((F, n)) for _ in range(3))
         for stack in self._stacks:
-            lk, re, sh = self._interp(stack, cols, ln_lam / math.log(10))
+            lk, re, sh = self._interp(stack, cols, ln_lam[stack[0]] / math.log(10))
             log_k[stack[0]], rel_err[stack[0]], shared[stack[0]] = lk, re, sh
-        ln_fac = (1 - self._s.sum(axis=1))[:, None] * ln_lam[None, :]
+        ln_fac = (1 - self._s.sum(axis=1))[:, None] * ln_lam
         for j, filler in enumerate(self._fillers):
             ln_fac += self._s[:, j][:, None] * cols.get(f"ln k_{filler}", zeros)[None, :]
-        ln_fac += self._film[:, None] * cols.get("film_nm", zeros)[None, :]
+        film = cols.get("film_nm", zeros)[None, :]
+        extra = np.zeros((F, n))
+        if bound is not None:
+            film = film * bound.film_factor(cols, n)
+            log10_r = bound.log10_r(cols, ln_lam)
+            log_k = log_k + bound.ln_k_shift(cols, log10_r)
+            extra = bound.relative_variance(cols, log10_r)
+        ln_fac += self._film[:, None] * film
         k = np.exp(log_k + ln_fac)
         err = rel_err * k
         tau = cols.get("tau_offset", 0.0)
@@ -426,7 +535,10 @@ class JointLikelihood:
             if f"slope_{g}" in cols:
                 shift = shift + tau_s * cols[f"slope_{g}"] * self._z[i]
             k[i] *= 1 + shift
-        return k, err
+        if bound is not None:
+            seen = bound.apparent(k, cols)
+            err, k = err * seen / k, seen
+        return k, err, extra
 
     def conductivities(self, cols: Mapping[str, np.ndarray], f: str
                        ) -> tuple[np.ndarray, np.ndarray]:
@@ -438,22 +550,75 @@ class JointLikelihood:
     def terms(self, theta: np.ndarray) -> np.ndarray:
         """Each formulation's log-likelihood term, (F, N) in :attr:`order`, at the points
         ``theta`` (N, D): :func:`~itr_identify.inference.calibrate.log_likelihood` of the
-        measured mean with :func:`~itr_identify.inference.calibrate.variance`, the pooled
-        packing variance counted as an estimate."""
+        measured mean with :func:`~itr_identify.inference.calibrate.variance` (plus a
+        candidate effect's own variance), the pooled packing variance counted as an
+        estimate; with a density column, each formulation's density term added to its
+        own (:func:`density_data`)."""
         cols = self.space.columns(np.atleast_2d(theta))
-        k, err = self.conductivities_all(cols)
-        v = variance(self._se, k, err, self._scatter, self._model_sd)
-        return log_likelihood(self._mean - k, v, self._se ** 2, self._n,
-                              estimated=((self._pack * k) ** 2, self._dof))
+        k, err, extra = self._evaluate(cols)
+        v = variance(self._se, k, err, self._scatter, self._model_sd) + extra * k ** 2
+        out = log_likelihood(self._mean - k, v, self._se ** 2, self._n,
+                             estimated=((self._pack * k) ** 2, self._dof))
+        return out + self._density_terms(cols, k.shape[1]) + self._series_terms(cols, k)
+
+    def _series_terms(self, cols: Mapping[str, np.ndarray], k: np.ndarray) -> np.ndarray:
+        """(F, N) the Gaussian log likelihood of each thickness series' shape: the mean at
+        each thickness over the mean at the thinnest, against the model's (1 without a
+        tester's contact; the model's own errors multiply every thickness alike and cancel)."""
+        out = np.zeros(k.shape)
+        tester = (self.bound is not None and self.bound.effect.kind == "tester")
+        rc = self.bound._x(cols) if tester else None
+        for i, f in enumerate(self.order):
+            if f not in self.series:
+                continue
+            t, m, se = self.series[f]
+            if tester:
+                kk = k[i] / (1.0 - rc * k[i] * self.bound.inverse_thickness.get(f, 0.0))
+                seen = kk[None, :] / (1.0 + rc[None, :] * kk[None, :] / t[:, None])
+                pred = seen[1:] / seen[:1]
+            else:
+                pred = np.ones((t.size - 1, k.shape[1]))
+            obs = (m[1:] / m[0])[:, None]
+            var = ((se[1:] ** 2 + (m[1:] / m[0]) ** 2 * se[0] ** 2) / m[0] ** 2)[:, None]
+            out[i] = (-0.5 * ((obs - pred) ** 2 / var + np.log(2 * math.pi * var))).sum(axis=0)
+        return out
+
+    def _density_terms(self, cols: Mapping[str, np.ndarray], n: int) -> np.ndarray:
+        """(F, N) the Gaussian log likelihood of each measured mean density."""
+        out = np.zeros((len(self.order), n))
+        if not self.density:
+            return out
+        if self.bound is not None:
+            phi, voids = self.bound.composition(cols, n)
+        else:
+            phi = np.repeat(np.array([sum(self.tables[f].fractions.values())
+                                      for f in self.order])[:, None], n, axis=1)
+            voids = np.zeros_like(phi)
+        for i, f in enumerate(self.order):
+            if f not in self.density:
+                continue
+            mean, se, rho_filler, rho_matrix = self.density[f]
+            rho = phi[i] * rho_filler + (1.0 - phi[i] - voids[i]) * rho_matrix
+            var = se ** 2 + (DENSITY_MODEL_SD * rho) ** 2
+            out[i] = -0.5 * ((mean - rho) ** 2 / var + np.log(2 * math.pi * var))
+        return out
 
     def chi_square_terms(self, theta: np.ndarray) -> np.ndarray:
         """Each formulation's Gaussian chi-square term, (F, N) in :attr:`order`: the squared
         residual of the measured mean over the likelihood's variance plus the pooled
         packing variance (what :meth:`terms` counts, without the Student t's tails)."""
-        cols = self.space.columns(np.atleast_2d(theta))
-        k, err = self.conductivities_all(cols)
-        v = variance(self._se, k, err, self._scatter, self._model_sd) + (self._pack * k) ** 2
+        k, v = self.predictive(theta)
         return (self._mean - k) ** 2 / v
+
+    def predictive(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(model k, the variance of a measured mean about it), each (F, N) in
+        :attr:`order`, W/(m K) and (W/(m K))^2: the likelihood's variance plus the pooled
+        packing variance."""
+        cols = self.space.columns(np.atleast_2d(theta))
+        k, err, extra = self._evaluate(cols)
+        v = (variance(self._se, k, err, self._scatter, self._model_sd) + extra * k ** 2
+             + (self._pack * k) ** 2)
+        return k, v
 
     def per_formulation(self, theta: np.ndarray) -> dict[str, np.ndarray]:
         """Each formulation's log-likelihood term (N,) at the points ``theta`` (N, D)."""
@@ -752,7 +917,8 @@ def _start(likelihood: JointLikelihood, rng: np.random.Generator, walkers: int
 
 def sample(likelihood: JointLikelihood, *, seed: int = 0, walkers: int | None = None,
            steps: int | None = None, burn: int | None = None,
-           progress: bool = False, marginals: bool = True) -> JointPosterior:
+           progress: bool = False, marginals: bool = True,
+           evidence_draws: int | None = None) -> JointPosterior:
     """Sample the posterior of ``likelihood`` (its space's priors) with emcee: ``walkers``
     (default :data:`WALKERS_PER_DIM` per dimension, at least :data:`WALKERS_MIN`)
     differential-evolution walkers, seeded; by default a first round of :data:`ROUND_STEPS`
@@ -765,7 +931,9 @@ def sample(likelihood: JointLikelihood, *, seed: int = 0, walkers: int | None = 
     to the chain (:func:`refine`), whose independent weighted draws are the posterior where
     they are worth :data:`TARGET_DRAWS` (``source``); the resistances' marginals are then
     attached (:func:`with_marginals`) unless ``marginals`` is False (a posterior whose
-    resistance quantiles nobody quotes). ``progress``: a bar over the steps
+    resistance quantiles nobody quotes); ``evidence_draws``: the importance draws of the
+    evidence (default :data:`REFINE_PER_TARGET` x :data:`TARGET_DRAWS`). ``progress``: a bar
+    over the steps
     whose total is, after each round, the steps the rule is expected to need (so its ETA
     is the sampler's)."""
     import emcee
@@ -808,7 +976,7 @@ def sample(likelihood: JointLikelihood, *, seed: int = 0, walkers: int | None = 
     logp = sampler.get_log_prob(discard=discard, flat=True)
     ll = logp - space.log_prior(chain)
     x, w, ess, ln_z, ln_z_se = refine(likelihood, chain, seed=seed,
-                                      draws=REFINE_PER_TARGET * TARGET_DRAWS)
+                                      draws=evidence_draws or REFINE_PER_TARGET * TARGET_DRAWS)
     weights = np.full(chain.shape[0], 1.0 / chain.shape[0])
     source = "chain"
     if target is None and ess >= TARGET_DRAWS:

@@ -36,6 +36,7 @@ from .joint import (
     Tabulated,
     sample,
 )
+from .effect_terms import JointEffect
 from .measurements import Measurements
 from .nuisance import FilmPrior, InputPrior
 from .priors import DEFAULT_MODEL_FORM, DEFAULT_RESISTANCE, ModelFormPrior, ResistancePrior
@@ -58,10 +59,13 @@ def likelihood_of(models: Mapping[str, ForwardModel], measurements: Measurements
                   elasticity: Mapping[str, Mapping[str, float]], *,
                   resistance: ResistancePrior = DEFAULT_RESISTANCE,
                   model_form: ModelFormPrior = DEFAULT_MODEL_FORM,
-                  hold: Mapping[str, float] | None = None) -> JointLikelihood:
+                  hold: Mapping[str, float] | None = None,
+                  effect: JointEffect | None = None) -> JointLikelihood:
     """The joint likelihood of ``models`` given ``measurements`` over the space of the
     priors (module notes); ``elasticity``: :func:`~.nuisance.elasticities` of the models;
-    ``hold``: parameters held at a value."""
+    ``hold``: parameters held at a value; ``effect``: a candidate effect's terms
+    (:mod:`.effect_terms`). A density column is read where the material system states the
+    phase densities."""
     system = next(iter(models.values())).settings.system
     k0 = system.conductivities()
     for pr in inputs.values():
@@ -72,12 +76,22 @@ def likelihood_of(models: Mapping[str, ForwardModel], measurements: Measurements
                              f"({pr.nominal:g}) needs models built there")
     tables = {f: Tabulated.of(f, m, elasticity.get(f, {})) for f, m in models.items()}
     space = JointSpace.build(tables, matrix=system.matrix, resistance=resistance,
-                             inputs=inputs, model_form=model_form, hold=hold)
+                             inputs=inputs, model_form=model_form, hold=hold, effect=effect)
     groups: dict[str, list[ForwardModel]] = {}
     for f, t in tables.items():
         groups.setdefault(t.group, []).append(models[f])
     return JointLikelihood(tables, measurements, space,
-                           scatter={g: pooled_scatter(ms) for g, ms in groups.items()})
+                           scatter={g: pooled_scatter(ms) for g, ms in groups.items()},
+                           densities=_densities(system),
+                           matrix_conductivity=float(k0[system.matrix]))
+
+
+def _densities(system) -> dict[str, float] | None:
+    """The system's phase densities, g/cm^3, where it states every one (else None)."""
+    try:
+        return dict(system.densities())
+    except ValueError:
+        return None
 
 
 def run_joint(models: Mapping[str, ForwardModel], measurements: Measurements,

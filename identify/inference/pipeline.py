@@ -85,14 +85,18 @@ class Identification:
     priors: dict = field(default_factory=dict)
     model_form: ModelFormPrior = DEFAULT_MODEL_FORM
 
-    def likelihood(self):
+    def likelihood(self, *, model_form: ModelFormPrior | None = None, effect=None):
         """The joint posterior's likelihood (:func:`~.joint_fit.likelihood_of` of the
-        models, measurements, priors and elasticities of this identification)."""
+        models, measurements, priors and elasticities of this identification); with
+        ``model_form`` in place of its own, and a candidate ``effect``'s terms
+        (:mod:`.effect_terms`)."""
         from .joint_fit import likelihood_of
 
         return likelihood_of(self.models, self.measurements, self.priors,
                              self.inputs.get("elasticity", {}),
-                             resistance=self.resistance_prior, model_form=self.model_form)
+                             resistance=self.resistance_prior,
+                             model_form=self.model_form if model_form is None else model_form,
+                             effect=effect)
 
     def leave_one_out(self, *, seed: int = 0) -> list[dict]:
         """Each formulation predicted from the others (the joint posterior without the

@@ -24,7 +24,7 @@ from .labels import MICRO_M, parameter_label, parameter_symbol, phase_label
 
 __all__ = ["psd_figure", "rve_figure", "parity_figure", "surrogate_check", "screening_figure",
            "posterior_figure", "packed_diameters", "filler_cuts", "box_cut_text",
-           "temperature_figure", "level_caption"]
+           "temperature_figure", "level_caption", "effect_residual_figure"]
 
 
 def _pyplot():
@@ -417,3 +417,31 @@ def temperature_figure(result, path: Path, *, level: Mapping[str, object] | None
                  fontsize=9)
     fig.tight_layout()
     return _save(fig, path)
+
+
+def effect_residual_figure(effect_fit, path: Path) -> Path:
+    """Each formulation's residual (measured mean - model k) over the sd of a measured mean
+    about the model, at the base model's best point and at the named effect's: the gap
+    before and after (:class:`~itr_identify.discrepancy.on_identification.EffectFit`)."""
+    plt = _pyplot()
+    forms = list(effect_fit.residuals)
+    rows = np.array([effect_fit.residuals[f] for f in forms])
+    mean, k_base, sd_base, k_eff, sd_eff = rows.T
+    z0, z1 = (mean - k_base) / sd_base, (mean - k_eff) / sd_eff
+    x = np.arange(len(forms))
+    fig, ax = plt.subplots(figsize=(max(6.0, 0.55 * len(forms) + 2), 3.6))
+    ax.bar(x - 0.2, z0, 0.4, label=f"base model (chi-square {effect_fit.base.chi_square:.1f})",
+           color="0.6")
+    ax.bar(x + 0.2, z1, 0.4, label=f"with {effect_fit.effect.name} (chi-square "
+           f"{effect_fit.effect.chi_square:.1f})", color="tab:blue")
+    for y in (-2, 2):
+        ax.axhline(y, color="0.3", lw=0.6, ls=":")
+    ax.axhline(0, color="0.2", lw=0.8)
+    ax.set_xticks(x, forms, rotation=45, ha="right")
+    ax.set_ylabel("(measured - model) / sd")
+    ax.legend(fontsize=7, loc="best")
+    fig.tight_layout()
+    with atomic_path(Path(path)) as tmp:
+        fig.savefig(tmp, dpi=130, format="png")
+    plt.close(fig)
+    return Path(path)

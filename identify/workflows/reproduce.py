@@ -72,6 +72,22 @@ class ReproduceSettings:
     #: the material system's (:meth:`~itr_fv.materials.material_system.MaterialSystem.
     #: conductivity_sds`; 0 holds one at nominal)
     conductivity_sd: tuple[tuple[str, float], ...] = ()
+    #: Run the discrepancy verdict (the library's effects on the gap identification's own
+    #: model, :mod:`itr_identify.workflows.effects`).
+    discrepancy: bool = False
+    #: An effect fitted jointly with the resistances beside the base model (one of
+    #: :data:`~itr_identify.discrepancy.joint_effects.JOINT_EFFECTS`; None: the named one).
+    effect: str | None = None
+
+    def __post_init__(self) -> None:
+        from ..discrepancy.joint_effects import JOINT_EFFECTS
+
+        if self.effect is not None and self.effect not in JOINT_EFFECTS:
+            raise ValueError(f"effect: expected one of {', '.join(JOINT_EFFECTS)}, got "
+                             f"{self.effect!r}")
+        if (self.discrepancy or self.effect) and "gap" not in self.parametrisations:
+            raise ValueError("parametrisations: the discrepancy verdict and an effect are "
+                             "fitted on the gap identification; include 'gap'")
 
     def input_priors(self, phases) -> dict:
         """The inputs marginalised: the defaults of
@@ -279,8 +295,12 @@ def _reproduce(settings: ReproduceSettings, out: Path, progress: bool,
                                           seed=settings.seed, prior=ident.posterior.prior,
                                           tick=lambda: bar.update(1))
     t_lofo = time.perf_counter() - t
+    t = time.perf_counter()
+    extra = _effects(idents, settings, out, engine, progress, echo)
+    t_effects = time.perf_counter() - t
     echo("figures and fields")
     files, psd_fits = _figures(idents, validation, out)
+    files += extra[2]
     fields = drop_fields(engine, keep_fields, echo)
     files.append(write_solves(list(idents.values()), out / "full_solves.parquet"))
     head = headline(idents)
@@ -290,14 +310,17 @@ def _reproduce(settings: ReproduceSettings, out: Path, progress: bool,
     data["selection"] = report.selection(idents)
     data["surrogate_check"] = figures.surrogate_check(validation, idents)
     data["psd_fit"] = psd_fits
+    if extra[0]:
+        data["discrepancy"] = extra[0]
     files.append(write_text(out / "identified.json", json.dumps(data, indent=2) + "\n"))
     wall = time.perf_counter() - t0
     timing = {"identification (RVEs, reduced bases, calibration, screening)": t_ident,
               "validation full solves": t_val, "leave-one-formulation-out": t_lofo,
+              "discrepancy verdict and effect": t_effects,
               "total (before the report)": wall}
     files.append(write_text(out / "report.md", _reproduce_markdown(
         head, idents, meas, validation, lofo, psd_fits, timing, settings,
-        data["surrogate_check"])))
+        data["surrogate_check"]) + ("\n" + "\n".join(extra[1]) + "\n" if extra[1] else "")))
     files.append(write_manifest(out, files, {**settings.to_dict(), "fidelity_ran": runs_record(
         idents), "wall_s": round(wall, 1), "engine": engine.summary(), "store_fields": fields},
         job="reproduce"))
@@ -399,17 +422,33 @@ def run_identify(meas: Measurements, settings: ReproduceSettings, out: Path, *,
                      echo=echo) as engine:
         t0 = time.perf_counter()
         idents = _identify_all(meas, settings, progress, echo, engine)
+        extra = _effects(idents, settings, out, engine, progress, echo)
         drop_fields(engine, keep_fields, echo)
         echo(f"engine: {engine.summary()}")
-    return _identify_report(meas, settings, out, idents, t0, echo)
+    return _identify_report(meas, settings, out, idents, t0, echo, extra)
+
+
+def _effects(idents, settings: ReproduceSettings, out: Path, engine: SolveEngine,
+             progress: bool, echo: Callable[[str], None]) -> tuple[dict, list[str], list[Path]]:
+    """The discrepancy verdict and the effect the settings ask for (nothing where they ask
+    for neither)."""
+    if not (settings.discrepancy or settings.effect):
+        return {}, [], []
+    from .effects import run_effects
+
+    return run_effects(idents["gap"], out, engine=engine, verdict=settings.discrepancy,
+                       effect=settings.effect, progress=progress, echo=echo)
 
 
 def _identify_report(meas: Measurements, settings: ReproduceSettings, out: Path,
                      idents: dict[str, Identification], t0: float,
-                     echo: Callable[[str], None]) -> list[Path]:
+                     echo: Callable[[str], None],
+                     extra: tuple[dict, list[str], list[Path]] = ({}, [], [])) -> list[Path]:
     head = headline(idents)
     data = {"headline": head}
     data.update({p: report.identified_dict(i) for p, i in idents.items()})
+    if extra[0]:
+        data["discrepancy"] = extra[0]
     if len(idents) > 1:
         data["selection"] = report.selection(idents)
     files = [write_text(out / "identified.json", json.dumps(data, indent=2) + "\n")]
@@ -424,6 +463,9 @@ def _identify_report(meas: Measurements, settings: ReproduceSettings, out: Path,
     lines += ["", "## Fit", ""] + report.selection_lines(idents)
     lines += [""] + report.residual_lines(idents)
     lines += ["", "## Identifiability", ""] + report.identifiability_lines(idents)
+    if extra[1]:
+        lines += [""] + extra[1]
+        files += extra[2]
     files.append(write_text(out / "report.md", "\n".join(lines) + "\n"))
     files.append(write_manifest(out, files, {"measurements": meas.source,
                                              **settings.to_dict(),
