@@ -203,22 +203,20 @@ def test_reproduce_end_to_end_at_tiny_size(tmp_path):
     assert "snapshot fields removed" in manifest["inputs"]["store_fields"]
 
 
-def test_identify_with_an_effect_and_the_verdict_writes_them_beside_the_base(tmp_path, capsys):
-    """``--discrepancy --effect tester``: the verdict over the library on the gap
-    identification's own model and the identification with the tester's contact beside
-    the base model, in the report, identified.json and a residual figure."""
+def test_identify_with_an_effect_writes_it_beside_the_base(tmp_path, capsys):
+    """``--effect tester``: the identification with the tester's contact beside the base
+    model, in the report, identified.json and a residual figure (the verdict over the
+    library, ``--discrepancy``, is tested in tests/test_effects_on_identification.py)."""
     csv = write(tmp_path / "m.csv", "formulation,replicate,k_W_per_mK\n"
                 "Al2O3-55,1,1.29\nAl2O3-55,2,1.30\nAl2O3-55,3,1.22\n"
                 "Al2O3-62,1,1.70\nAl2O3-62,2,1.75\nAl2O3-62,3,1.66\n"
                 "AlN-55,1,1.50\nAlN-55,2,1.46\nAlN-55,3,1.55\n")
     out = tmp_path / "out"
     assert main(["identify", csv, "--out", str(out), "--parametrisation", "gap",
-                 "--discrepancy", "--effect", "tester", *TINY]) == 0
+                 "--effect", "tester", *TINY]) == 0
     data = json.loads((out / "identified.json").read_text())
     d = data["discrepancy"]
-    assert d["verdict"]["verdict"] in ("none", "named", "tie", "unexplained")
-    assert [c["key"] for c in d["verdict"]["candidates"]] == [
-        "matrix", "filler", "porosity", "fraction", "spots", "tester", "batch", "film"]
+    assert "verdict" not in d
     fit = d["effect_fit"]
     assert fit["effect"]["key"] == "tester" and fit["base"]["key"] == "base"
     lo, hi = fit["effect"]["value"][1:]
@@ -226,5 +224,6 @@ def test_identify_with_an_effect_and_the_verdict_writes_them_beside_the_base(tmp
     assert set(fit["residuals"]) == {"Al2O3-55", "Al2O3-62", "AlN-55"}
     report = (out / "report.md").read_text()
     assert "## Discrepancy" in report and "### With tester contact resistance" in report
+    assert "not named by the rule" not in report
     assert (out / "effect_residuals.png").stat().st_size > 1000
     assert "discrepancy: " in capsys.readouterr().out
