@@ -37,8 +37,9 @@ Usage::
     python validation/effect_naming_study.py analyse [--store DIR] [--out DIR]
 
 ``solve`` makes the truth ratios (resumable: each solve is kept in the store and the ratios
-in ``DIR/effect_truths.json``); ``analyse`` builds the model, names every table (each table's
-verdict appended to ``DIR/effect_naming_runs.jsonl``: a killed run resumes) and writes
+in ``DIR/effect_truths.json``); ``analyse [--shard K/N]`` builds the model, names every
+table (each table's verdict appended to ``DIR/effect_naming_runs.K.jsonl``: a killed run
+resumes) and writes
 ``validation/results/effect_naming.json`` and ``.md``.
 """
 
@@ -187,7 +188,15 @@ def _model(store: Path):
     return ident, effects
 
 
-def analyse(store: Path, out: Path) -> list[dict]:
+def _runs(store: Path) -> list[dict]:
+    """Every table named so far, over the shards' files."""
+    rows = []
+    for path in sorted(store.glob("effect_naming_runs*.jsonl")):
+        rows += [json.loads(x) for x in path.read_text().splitlines() if x.strip()]
+    return rows
+
+
+def analyse(store: Path, out: Path, shard: tuple[int, int] = (0, 1)) -> list[dict]:
     from itr_identify.discrepancy.naming import NamingSettings, name_effect
     from itr_identify.inference.joint_fit import likelihood_of
     from itr_identify.inference.priors import ModelFormPrior
@@ -197,12 +206,14 @@ def analyse(store: Path, out: Path) -> list[dict]:
     base_k = {f: v["k_truth"] for f, v in sr.truth_k().items() if f in FORMULATIONS}
     ident, effects = _model(store)
     off = ModelFormPrior(on=False)
-    runs_path = store / "effect_naming_runs.jsonl"
-    done = [json.loads(x) for x in runs_path.read_text().splitlines()] \
-        if runs_path.exists() else []
+    k, n = shard
+    runs_path = store / f"effect_naming_runs.{k}.jsonl"
+    done = _runs(store)
     seen = {(r["case"], r["seed"]) for r in done}
     jobs = [("null", s) for s in NULL_SEEDS] + [(c, s) for c in STUDY for s in EFFECT_SEEDS]
-    for case, seed in tqdm(jobs, desc="tables", unit="table"):
+    # interleaved: a shard's first tables span the null and every effect
+    jobs = sorted(jobs, key=lambda j: (j[1] if j[0] != "null" else j[1] - 100, j[0]))[k::n]
+    for case, seed in tqdm(jobs, desc=f"tables (shard {k}/{n})", unit="table"):
         if (case, seed) in seen:
             continue
         meas = table(truths, base_k, case, seed)
@@ -220,7 +231,7 @@ def analyse(store: Path, out: Path) -> list[dict]:
         with runs_path.open("a") as fh:
             fh.write(json.dumps(row) + "\n")
         done.append(row)
-    return done
+    return _runs(store)
 
 
 def summarise(rows: list[dict]) -> dict:
@@ -286,7 +297,14 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("phase", choices=("solve", "analyse"))
     p.add_argument("--store", default="effect-naming-study")
     p.add_argument("--out", default="validation/results")
+    p.add_argument("--shard", default="0/1", help="analyse: this process's share K/N of the "
+                   "tables (run N processes, K = 0 .. N-1; the last one's summary holds all "
+                   "that finished)")
     args = p.parse_args(argv)
+    k, _, n = args.shard.partition("/")
+    shard = (int(k), int(n or 1))
+    if not 0 <= shard[0] < shard[1]:
+        raise SystemExit(f"--shard: expected K/N with 0 <= K < N, got {args.shard!r}")
     store, out = Path(args.store), Path(args.out)
     store.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
@@ -294,7 +312,7 @@ def main(argv: list[str] | None = None) -> int:
         solve(store)
         print(f"truth solves done in {time.perf_counter() - t0:.0f} s")
         return 0
-    rows = analyse(store, out)
+    rows = analyse(store, out, shard)
     s = summarise(rows)
     write(out, rows, s, time.perf_counter() - t0)
     print(json.dumps({k: v for k, v in s.items() if k != "per_effect"}, indent=1))
