@@ -52,8 +52,8 @@ def test_ratio_tables_hold_the_physics_of_their_effects(effects):
     assert fr["AlN-60"](lr, np.array([0.8]))[0] < fr["AlN-55"](lr, np.array([0.8]))[0]
 
 
-def test_the_rule_runs_on_the_identifications_model_and_says_its_verdict(ident):
-    v = name_on(ident, keys=["fraction", "spots", "tester"], settings=QUICK)
+def test_the_rule_runs_on_the_identifications_model_and_says_its_verdict(ident, effects):
+    v = name_on(ident, list(effects.values()), settings=QUICK)
     assert v.verdict in VERDICTS
     assert [c.key for c in v.candidates] == ["fraction", "spots", "tester"]
     assert set(v.base.resistances) == {"R_Al2O3_silicone", "R_AlN_silicone"}

@@ -226,4 +226,11 @@ def test_identify_with_an_effect_writes_it_beside_the_base(tmp_path, capsys):
     assert "## Discrepancy" in report and "### With tester contact resistance" in report
     assert "not named by the rule" not in report
     assert (out / "effect_residuals.png").stat().st_size > 1000
-    assert "discrepancy: " in capsys.readouterr().out
+    # the headline carries R under the base model and with the effect, without the model form
+    head = data["headline"]["discrepancy"]["effect"]
+    assert set(head["resistances"]) == {"R_Al2O3_silicone", "R_AlN_silicone"}
+    assert head["resistances"]["R_AlN_silicone"]["with_effect"] == fit["effect"][
+        "resistances"]["R_AlN_silicone"]
+    assert head["chi_square"]["base"][0] == fit["base"]["chi_square"]
+    printed = capsys.readouterr().out
+    assert "discrepancy: " in printed and "with tester contact resistance" in printed

@@ -206,8 +206,35 @@ def test_the_rule_names_ties_and_says_unexplained_as_its_notes_say():
     v = decide(base_bad, [_fit("a", 5.0, 0.4), _fit("b", 4.2, 0.6)], s)
     assert (v.verdict, v.tied, v.named) == ("tie", ("a", "b"), None)
     assert decide(base_bad, [_fit("a", 9.0, 1e-3)], s).verdict == "unexplained"
+    # a tie none of whose candidates fits: they reduce the gap, none closes it
+    v = decide(base_bad, [_fit("a", 5.0, 1e-3), _fit("b", 4.2, 1e-4)], s,
+               separate_by={"a": "measure A", "b": "measure B"})
+    assert (v.verdict, v.tied, v.named) == ("unexplained", ("a", "b"), None)
+    # one of the tied fits: a tie
+    v = decide(base_bad, [_fit("a", 5.0, 1e-3), _fit("b", 4.2, 0.3)], s)
+    assert (v.verdict, v.tied) == ("tie", ("a", "b"))
     with pytest.raises(ValueError, match=r"^tie_margin"):
         NamingSettings(tie_margin=5.0)
+
+
+def test_an_unexplained_tie_names_the_measurement_and_what_each_would_leave():
+    """The headline of a tie that fails its fits says "unexplained", names each tied
+    candidate's separating measurement and the resistances each would leave."""
+    from itr_identify.reporting.naming_words import headline_entry, headline_entry_lines
+
+    def fit(key, lz, r):
+        return ModelFit(key, f"effect {key}", lz, 0.05, 40.0, 8, 1e-5, {},
+                        {"R_A_m": (r, r / 2, 2 * r)}, "x", (1.0, 0.5, 2.0), 0.0)
+
+    v = decide(_fit("base", 0.0, 1e-6), [fit("a", 9.0, 1e-7), fit("b", 8.5, 3e-8)],
+               NamingSettings(), separate_by={"a": "a TGA", "b": "a second powder"})
+    entry = headline_entry(v)
+    assert entry["verdict"] == "unexplained" and entry["text"].startswith("unexplained")
+    assert "a TGA" in entry["measurement"] and "a second powder" in entry["measurement"]
+    assert entry["each_would_leave"] == {"effect a": {"R_A_m": [1e-7, 5e-8, 2e-7]},
+                                         "effect b": {"R_A_m": [3e-8, 1.5e-8, 6e-8]}}
+    text = "\n".join(headline_entry_lines(entry))
+    assert "the measurement to make" in text and "were it effect b" in text
 
 
 def _fraction_effect():

@@ -47,6 +47,8 @@ from itr_identify.reporting.figures import effect_residual_figure
 from itr_identify.reporting.naming_words import (
     candidate_lines,
     effect_fit_lines,
+    headline_entry,
+    headline_entry_lines,
     rule_sentence,
     verdict_sentence,
 )
@@ -75,23 +77,29 @@ def main(argv: list[str] | None = None) -> int:
         t1 = time.perf_counter()
         with tqdm(total=n_solves(ident, JOINT_EFFECTS), desc="effect ratio solves",
                   unit="solve") as bar:
-            verdict = name_on(ident, keys=JOINT_EFFECTS, engine=engine, settings=naming,
-                              tick=bar.update, step=lambda k: print(f"fitting: {k}",
-                                                                    flush=True))
+            built = {e.key: e for e in effects_of(ident, JOINT_EFFECTS, engine=engine,
+                                                  tick=bar.update)}
+        verdict = name_on(ident, list(built.values()), settings=naming,
+                          step=lambda k: print(f"fitting: {k}", flush=True))
         t_name = time.perf_counter() - t1
         key = verdict.named or (verdict.over_threshold[0] if verdict.over_threshold else max(
             (c.key for c in verdict.candidates), key=verdict.log_bayes_factor))
-        effect, = effects_of(ident, [key], engine=engine)
     t2 = time.perf_counter()
-    fit = with_effect(ident, effect, settings=naming, base=verdict.base)
+    fit = with_effect(ident, built[key], settings=naming)
     t_fit = time.perf_counter() - t2
     fig = effect_residual_figure(fit, out / "effect_naming_table3.png")
     inside, total = fit.loo_inside("effect")
+    head = headline_entry(verdict, fit)
     checks = {"named": verdict.verdict == "named",
+              "unexplained_names_the_measurement": (
+                  verdict.verdict in ("unexplained", "none")
+                  and head["text"].startswith(("unexplained", "nothing named"))
+                  and bool(head.get("measurement"))),
               "fit_passes_without_model_form": fit.effect.p >= FIT_P,
               "loo_inside_without_model_form": f"{inside} of {total}",
               "loo_target_met": inside >= LOO_INSIDE}
     data = {"verdict": verdict.to_dict(), "effect_fit": fit.to_dict(), "shown_effect": key,
+            "headline": head,
             "checks": checks, "seconds": {"identification": t_ident, "naming": t_name,
                                           "with_effect": t_fit}}
     write_text(out / "effect_naming_table3.json", json.dumps(data, indent=1) + "\n")
@@ -110,6 +118,12 @@ def main(argv: list[str] | None = None) -> int:
               f"Figure: `{fig.name}` (residuals over their sd, before and after).", "",
               "## Acceptance 3 (targets fixed before the run)", "",
               f"- verdict: {verdict.verdict}",
+              "- where none is named, the headline says \"unexplained\" and names the "
+              "measurement to make: " + ("met" if checks["unexplained_names_the_measurement"]
+                                         else "not this branch" if checks["named"]
+                                         else "MISSED"),
+              "", "The headline's lines:", "", "```",
+              *headline_entry_lines(head), "```", "",
               f"- chi-square with the effect, without the model form: p = {fit.effect.p:.2g} "
               f"(target >= {FIT_P}: {'met' if checks['fit_passes_without_model_form'] else 'MISSED'})",
               f"- leave-one-out with the effect, without the model form: {inside} of {total} "

@@ -15,7 +15,10 @@ The rule (:func:`decide`, its words in :mod:`itr_identify.reporting.naming_words
    :attr:`NamingSettings.threshold` (3: a Bayes factor of 20, "strong" on Kass and
    Raftery's scale), fixed before any table was read;
 2. those within :attr:`NamingSettings.tie_margin` of the best are tied with it: a tie of
-   two or more is reported as a tie, with the measurement that separates them;
+   two or more is reported as a tie, with the measurement that separates them and the
+   resistances each would leave, where at least one of them fits (p of its chi-square at
+   least :attr:`NamingSettings.fit_p`); where none fits, the tie reduces the gap without
+   closing it and the verdict is *unexplained* (the tie kept in :attr:`NamingVerdict.tied`);
 3. one alone over the threshold is *named* where its own fit passes (p of its chi-square at
    least :attr:`NamingSettings.fit_p`), else the discrepancy is *unexplained* (the best
    candidate reduces, does not remove, it);
@@ -44,6 +47,7 @@ __all__ = [
     "NamingSettings",
     "NamingVerdict",
     "decide",
+    "fit_and_posterior",
     "fit_model",
     "name_effect",
 ]
@@ -156,7 +160,8 @@ class NamingVerdict:
     named : str or None
         The named effect's key.
     tied : tuple of str
-        The keys tied at the top (a tie: two or more).
+        The keys tied at the top (two or more; empty without a tie), under a verdict
+        ``"tie"`` or, where none of them fits, ``"unexplained"``.
     over_threshold : tuple of str
         Every candidate over the threshold, best first.
     settings : NamingSettings
@@ -205,6 +210,12 @@ def fit_model(likelihood: JointLikelihood, settings: NamingSettings, *,
               effect: JointEffect | None = None) -> ModelFit:
     """Sample ``likelihood`` (built without the model form; with ``effect``'s terms where
     one is given) and read its evidence, fit, resistances and the effect's value."""
+    return fit_and_posterior(likelihood, settings, effect=effect)[0]
+
+
+def fit_and_posterior(likelihood: JointLikelihood, settings: NamingSettings, *,
+                      effect: JointEffect | None = None) -> tuple[ModelFit, Any]:
+    """:func:`fit_model` and the posterior it was read from (one sampling serves both)."""
     space = likelihood.space
     if any(n.startswith(("tau_", "slope_")) for n in space.names):
         raise ValueError("likelihood: build it without the model form (ModelFormPrior(on="
@@ -226,10 +237,11 @@ def fit_model(likelihood: JointLikelihood, settings: NamingSettings, *,
         i = post.names.index(p.name)
         value = tuple(float(v) for v in weighted_quantile(post.samples[:, i],
                                                           [0.5, 0.05, 0.95], post.weights))
-    return ModelFit(effect.key if effect else "base", effect.name if effect else "no effect",
-                    float(post.log_evidence), float(post.log_evidence_se), float(fit["chi2"]),
-                    int(fit["dof"]), float(fit["p"]), dict(fit["per_formulation"]), res,
-                    parameter, value, nominal)
+    model = ModelFit(effect.key if effect else "base", effect.name if effect else "no effect",
+                     float(post.log_evidence), float(post.log_evidence_se),
+                     float(fit["chi2"]), int(fit["dof"]), float(fit["p"]),
+                     dict(fit["per_formulation"]), res, parameter, value, nominal)
+    return model, post
 
 
 def decide(base: ModelFit, candidates: Sequence[ModelFit], settings: NamingSettings, *,
@@ -245,9 +257,10 @@ def decide(base: ModelFit, candidates: Sequence[ModelFit], settings: NamingSetti
     else:
         top = lbf[over[0]]
         tied = tuple(k for k in over if top - lbf[k] <= settings.tie_margin)
-        best = next(c for c in candidates if c.key == over[0])
+        best = _fit_of(candidates, over[0])
+        passing = [k for k in tied if _fit_of(candidates, k).p >= settings.fit_p]
         if len(tied) > 1:
-            verdict = "tie"
+            verdict = "tie" if passing else "unexplained"
         elif best.p >= settings.fit_p:
             verdict, named = "named", best.key
         else:
@@ -255,6 +268,10 @@ def decide(base: ModelFit, candidates: Sequence[ModelFit], settings: NamingSetti
     sep = {k: (separate_by or {}).get(k, "") for k in over}
     return NamingVerdict(verdict, base, tuple(candidates), named, tied if len(tied) > 1 else (),
                          over, settings, sep)
+
+
+def _fit_of(candidates: Sequence[ModelFit], key: str) -> ModelFit:
+    return next(c for c in candidates if c.key == key)
 
 
 def name_effect(make_likelihood: Callable[[JointEffect | None], JointLikelihood],

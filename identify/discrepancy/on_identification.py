@@ -22,11 +22,10 @@ import numpy as np
 from itr_surrogate.engine import SolveEngine
 
 from ..inference.effect_terms import JointEffect
-from ..inference.joint import sample
 from ..inference.joint_fit import leave_one_out_joint
 from ..inference.priors import ModelFormPrior
-from .joint_effects import JOINT_EFFECTS, joint_effects, n_ratio_solves, ratio_tables
-from .naming import ModelFit, NamingSettings, NamingVerdict, fit_model, name_effect
+from .joint_effects import joint_effects, n_ratio_solves, ratio_tables
+from .naming import ModelFit, NamingSettings, NamingVerdict, fit_and_posterior, name_effect
 
 __all__ = ["EffectFit", "effects_of", "name_on", "with_effect"]
 
@@ -84,31 +83,27 @@ def n_solves(ident, keys: Sequence[str]) -> int:
     return n_ratio_solves(len(ident.models), keys)
 
 
-def name_on(ident, *, keys: Sequence[str] = JOINT_EFFECTS, engine: SolveEngine | None = None,
-            settings: NamingSettings | None = None, tick: Callable[[], None] | None = None,
+def name_on(ident, effects: Sequence[JointEffect], *, settings: NamingSettings | None = None,
             step: Callable[[str], None] | None = None) -> NamingVerdict:
-    """The rule on ``ident``'s table: base and every candidate of ``keys`` on the one joint
-    model without the model form (module notes)."""
-    effects = effects_of(ident, keys, engine=engine, tick=tick)
+    """The rule on ``ident``'s table: base and every candidate of ``effects`` (built by
+    :func:`effects_of` on ``ident``) on the one joint model without the model form (module
+    notes)."""
     off = ModelFormPrior(on=False)
     return name_effect(lambda e: ident.likelihood(model_form=off, effect=e), effects,
                        settings or NamingSettings(), tick=step)
 
 
-def with_effect(ident, effect: JointEffect, *, settings: NamingSettings | None = None,
-                base: ModelFit | None = None) -> EffectFit:
-    """``effect`` fitted jointly with the resistances beside the base model (module notes);
-    ``base``: its fit where the rule already made it."""
+def with_effect(ident, effect: JointEffect, *,
+                settings: NamingSettings | None = None) -> EffectFit:
+    """``effect`` fitted jointly with the resistances beside the base model (module notes):
+    each model sampled once, its fit, leave-one-out and best point read from that sample."""
     settings = settings or NamingSettings()
     off = ModelFormPrior(on=False)
     fits, loos, best = {}, {}, {}
     for which, e in (("base", None), ("effect", effect)):
         lik = ident.likelihood(model_form=off, effect=e)
-        fit = base if (which == "base" and base is not None) else fit_model(
-            lik, settings, effect=e)
-        post = sample(lik, seed=settings.seed, steps=settings.steps, burn=settings.burn,
-                      marginals=False, evidence_draws=settings.evidence_draws)
-        fits[which], loos[which] = fit, leave_one_out_joint(post, lik, seed=settings.seed)
+        fits[which], post = fit_and_posterior(lik, settings, effect=e)
+        loos[which] = leave_one_out_joint(post, lik, seed=settings.seed)
         best[which] = _best_point(lik, post)
     res = {}
     for i, f in enumerate(best["base"][0]):

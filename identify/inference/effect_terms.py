@@ -291,6 +291,20 @@ class BoundEffect:
                           for f in self.order])[:, None]
         return k / (1.0 + self._x(cols)[None, :] * k * inv_t)
 
+    def series_shape(self, cols: Mapping[str, np.ndarray], formulation: str,
+                     apparent: np.ndarray, thickness_m: np.ndarray) -> np.ndarray:
+        """(T-1, N) what the tester reads at each thickness of a series (m, thinnest first)
+        over what it reads at the thinnest, for ``formulation`` read as ``apparent`` (N,)
+        at its samples' mean 1/thickness (1 for every effect but the tester's contact: the
+        model's own errors multiply every thickness alike and cancel)."""
+        t = np.asarray(thickness_m, dtype=float)
+        if self.effect.kind != "tester":
+            return np.ones((t.size - 1, apparent.size))
+        rc = self._x(cols)
+        k = apparent / (1.0 - rc * apparent * self.inverse_thickness.get(formulation, 0.0))
+        seen = k[None, :] / (1.0 + rc[None, :] * k[None, :] / t[:, None])
+        return seen[1:] / seen[:1]
+
     def relative_variance(self, cols: Mapping[str, np.ndarray], log10_r: np.ndarray
                           ) -> np.ndarray:
         """(F, N) a formulation's own relative error variance added by the effect."""

@@ -284,17 +284,34 @@ class JointSpace:
 
     def log_prior(self, theta: np.ndarray) -> np.ndarray:
         """Log prior density (N,) of the points ``theta`` (N, D); -inf outside."""
+        uni, nor, a, b, const = self._prior_arrays
+        x = theta.T
+        with np.errstate(invalid="ignore"):
+            terms = np.where(uni, np.where((x >= a) & (x <= b), const, -np.inf),
+                             np.where(nor, -0.5 * ((x - a) / b) ** 2 - const,
+                                      np.where(x >= 0, -0.5 * (x / b) ** 2 + const,
+                                               -np.inf)))
         out = np.zeros(theta.shape[0])
-        for i, (kind, a, b) in enumerate(zip(self.kinds, self.a, self.b)):
-            x = theta[:, i]
-            if kind == "uniform":
-                out += np.where((x >= a) & (x <= b), -math.log(b - a), -np.inf)
-            elif kind == "normal":
-                out += -0.5 * ((x - a) / b) ** 2 - math.log(b * math.sqrt(2 * math.pi))
-            else:
-                out += np.where(x >= 0, -0.5 * (x / b) ** 2
-                                + math.log(math.sqrt(2 / math.pi) / b), -np.inf)
+        for row in terms:           # parameter by parameter, the sum's order kept
+            out += row
         return out
+
+    @property
+    def _prior_arrays(self) -> tuple[np.ndarray, ...]:
+        """(uniform?, normal?, a, b, the log density's constant), each (D, 1)."""
+        got = self.__dict__.get("_prior_cache")
+        if got is None:
+            col = lambda v: np.asarray(v)[:, None]  # noqa: E731 - (D, 1) columns
+            const = [-math.log(b - a) if k == "uniform" else
+                     math.log(b * math.sqrt(2 * math.pi)) if k == "normal" else
+                     math.log(math.sqrt(2 / math.pi) / b)
+                     for k, a, b in zip(self.kinds, self.a, self.b)]
+            got = (col([k == "uniform" for k in self.kinds]),
+                   col([k == "normal" for k in self.kinds]),
+                   col(np.asarray(self.a, dtype=float)), col(np.asarray(self.b, dtype=float)),
+                   col(np.asarray(const, dtype=float)))
+            object.__setattr__(self, "_prior_cache", got)
+        return got
 
     def draw(self, rng: np.random.Generator, n: int) -> np.ndarray:
         """``n`` points from the prior, (n, D)."""
@@ -449,10 +466,11 @@ class JointLikelihood:
         self._stacks = []
         for key, idx in by.items():
             ts = [tabs[i] for i in idx]
-            self._stacks.append((np.array(idx), key[0], ts[0].axes,
-                                 [t.parameters for t in ts],
-                                 *(np.stack([np.asarray(getattr(t, a), float) for t in ts])
-                                   for a in ("log_k", "rel_err", "shared"))))
+            # log k, the error bound and the shared term on one first axis: one gather each
+            values = np.stack([np.stack([np.asarray(getattr(t, a), float) for t in ts])
+                               for a in ("log_k", "rel_err", "shared")])
+            names = [[f"log10 {t.parameters[d]}" for t in ts] for d in range(key[0])]
+            self._stacks.append((np.array(idx), key[0], ts[0].axes, names, values))
         self._fillers = sorted({x for t in tabs for x in t.elasticity if x != "film_nm"})
         self._s = np.array([[t.elasticity.get(x, 0.0) for x in self._fillers] for t in tabs]
                            ).reshape(len(tabs), len(self._fillers))
@@ -460,6 +478,15 @@ class JointLikelihood:
         self._system = np.array([t.system is not None for t in tabs], dtype=float)
         self._group = [self.space.groups[f][0] for f in self.order]
         self._z = np.array([self.space.groups[f][1] for f in self.order])
+        # the formulations with a shared correction offset (and those with a slope too)
+        known = set(self.space.names) | set(self.space.held)
+        self._offset_rows = np.array([i for i, g in enumerate(self._group)
+                                      if f"offset_{g}" in known], dtype=int)
+        self._offset_names = [f"offset_{self._group[i]}" for i in self._offset_rows]
+        sloped = [j for j, i in enumerate(self._offset_rows)
+                  if f"slope_{self._group[i]}" in known]
+        self._slope_at = np.array(sloped, dtype=int)
+        self._slope_names = [f"slope_{self._group[self._offset_rows[j]]}" for j in sloped]
         col = lambda a: np.array(a, dtype=float)[:, None]  # noqa: E731 - (F, 1) columns
         self._mean = col([self.data[f][0] for f in self.order])
         self._se = col([self.data[f][1] for f in self.order])
@@ -469,27 +496,29 @@ class JointLikelihood:
         self._pack = col([t.packing[0] if t.packing else 0.0 for t in tabs])
         self._dof = col([t.packing[1] if t.packing else 1 for t in tabs])
 
-    def _interp(self, stack, cols: Mapping[str, np.ndarray], shift: np.ndarray):
-        idx, dim, axes, params, log_k, rel_err, shared = stack
+    def _interp(self, stack, cols: Mapping[str, np.ndarray], shift: np.ndarray
+                ) -> np.ndarray:
+        """(3, F_stack, N): log k, the error bound and the shared term of one stack of
+        tables, interpolated (multi)linearly at the points' resistances."""
+        idx, dim, axes, names, values = stack
         n = shift.shape[-1]
         if dim == 0:
-            return tuple(np.repeat(a.reshape(-1, 1), n, axis=1) for a in (log_k, rel_err,
-                                                                           shared))
+            return np.repeat(values[:, :, None], n, axis=2)
         rows = np.arange(len(idx))[:, None]
         where = []
         for d, ax in enumerate(axes):
-            x = np.stack([cols[f"log10 {p[d]}"] for p in params]) + shift
+            x = np.stack([cols[name] for name in names[d]]) + shift
             t = np.clip((x - ax[0]) / (ax[1] - ax[0]), 0.0, ax.size - 1 - 1e-9)
-            i = np.floor(t).astype(int)
+            i = t.astype(int)
             where.append((i, t - i))
         if dim == 1:
             (i, w), = where
-            return tuple(a[rows, i] * (1 - w) + a[rows, i + 1] * w
-                         for a in (log_k, rel_err, shared))
+            return values[:, rows, i] * (1 - w) + values[:, rows, i + 1] * w
         (i, a_), (j, b_) = where
-        return tuple((1 - a_) * (1 - b_) * t[rows, i, j] + a_ * (1 - b_) * t[rows, i + 1, j]
-                     + (1 - a_) * b_ * t[rows, i, j + 1] + a_ * b_ * t[rows, i + 1, j + 1]
-                     for t in (log_k, rel_err, shared))
+        return ((1 - a_) * (1 - b_) * values[:, rows, i, j]
+                + a_ * (1 - b_) * values[:, rows, i + 1, j]
+                + (1 - a_) * b_ * values[:, rows, i, j + 1]
+                + a_ * b_ * values[:, rows, i + 1, j + 1])
 
     def conductivities_all(self, cols: Mapping[str, np.ndarray]
                            ) -> tuple[np.ndarray, np.ndarray]:
@@ -508,10 +537,10 @@ class JointLikelihood:
         ln_lam = np.repeat(cols.get(f"ln k_{self.space.matrix}", zeros)[None, :], F, axis=0)
         if bound is not None:
             ln_lam = ln_lam + bound.ln_matrix_shift(cols, n)
-        log_k, rel_err, shared = (np.empty((F, n)) for _ in range(3))
+        table = np.empty((3, F, n))
         for stack in self._stacks:
-            lk, re, sh = self._interp(stack, cols, ln_lam[stack[0]] / math.log(10))
-            log_k[stack[0]], rel_err[stack[0]], shared[stack[0]] = lk, re, sh
+            table[:, stack[0]] = self._interp(stack, cols, ln_lam[stack[0]] / math.log(10))
+        log_k, rel_err, shared = table
         ln_fac = (1 - self._s.sum(axis=1))[:, None] * ln_lam
         for j, filler in enumerate(self._fillers):
             ln_fac += self._s[:, j][:, None] * cols.get(f"ln k_{filler}", zeros)[None, :]
@@ -527,14 +556,15 @@ class JointLikelihood:
         err = rel_err * k
         tau = cols.get("tau_offset", 0.0)
         tau_s = cols.get("tau_slope", 0.0)
-        for i, g in enumerate(self._group):
-            if f"offset_{g}" not in cols:
-                continue
-            scale = np.sqrt(self._system[i] * shared[i] ** 2 + tau ** 2)
-            shift = scale * cols[f"offset_{g}"]
-            if f"slope_{g}" in cols:
-                shift = shift + tau_s * cols[f"slope_{g}"] * self._z[i]
-            k[i] *= 1 + shift
+        rows = self._offset_rows
+        if rows.size:
+            scale = np.sqrt(self._system[rows][:, None] * shared[rows] ** 2 + tau ** 2)
+            shift = scale * np.stack([cols[name] for name in self._offset_names])
+            if self._slope_at.size:
+                at = self._slope_at
+                shift[at] = shift[at] + tau_s * np.stack(
+                    [cols[name] for name in self._slope_names]) * self._z[rows[at]][:, None]
+            k[rows] *= 1 + shift
         if bound is not None:
             seen = bound.apparent(k, cols)
             err, k = err * seen / k, seen
@@ -566,18 +596,12 @@ class JointLikelihood:
         each thickness over the mean at the thinnest, against the model's (1 without a
         tester's contact; the model's own errors multiply every thickness alike and cancel)."""
         out = np.zeros(k.shape)
-        tester = (self.bound is not None and self.bound.effect.kind == "tester")
-        rc = self.bound._x(cols) if tester else None
         for i, f in enumerate(self.order):
             if f not in self.series:
                 continue
             t, m, se = self.series[f]
-            if tester:
-                kk = k[i] / (1.0 - rc * k[i] * self.bound.inverse_thickness.get(f, 0.0))
-                seen = kk[None, :] / (1.0 + rc[None, :] * kk[None, :] / t[:, None])
-                pred = seen[1:] / seen[:1]
-            else:
-                pred = np.ones((t.size - 1, k.shape[1]))
+            pred = (self.bound.series_shape(cols, f, k[i], t) if self.bound is not None
+                    else np.ones((t.size - 1, k.shape[1])))
             obs = (m[1:] / m[0])[:, None]
             var = ((se[1:] ** 2 + (m[1:] / m[0]) ** 2 * se[0] ** 2) / m[0] ** 2)[:, None]
             out[i] = (-0.5 * ((obs - pred) ** 2 / var + np.log(2 * math.pi * var))).sum(axis=0)
@@ -632,6 +656,8 @@ class JointLikelihood:
         theta = np.atleast_2d(theta)
         lp = self.space.log_prior(theta)
         ok = np.isfinite(lp)
+        if ok.all():
+            return lp + self(theta)
         out = np.full(theta.shape[0], -np.inf)
         if ok.any():
             out[ok] = lp[ok] + self(theta[ok])

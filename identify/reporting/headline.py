@@ -46,6 +46,7 @@ from ..inference.nuisance import narrowing
 from ..inference.pipeline import Identification
 from .error_budget import error_budget
 from .level import level_record
+from .naming_words import headline_entry_lines
 
 __all__ = ["parameter_flag", "prior_ends", "choose_parametrisation", "parametrisation_choice",
            "chi_square_per_dof", "fidelity_note", "headline", "headline_lines",
@@ -346,11 +347,14 @@ def fidelity_note(settings, parameters: Mapping[str, object] | None = None,
             f"{s.faithful.voxel_um:g} and {s.faithful.coarse_voxel_um:g} um)." + star + area)
 
 
-def headline(idents: Mapping[str, Identification]) -> dict:
+def headline(idents: Mapping[str, Identification], *,
+             discrepancy: dict | None = None) -> dict:
     """The headline as plain JSON: ``quote`` (parametrisation), ``why``, ``supported`` (by
     the BIC, or None), ``fidelity``, ``fidelity_note`` and per parametrisation and parameter
     ``best``, ``interval_90`` (m^2 K/W) and ``flag``; ``quote`` and ``why`` are those of
-    the report's model-selection section (:func:`parametrisation_choice`)."""
+    the report's model-selection section (:func:`parametrisation_choice`); ``discrepancy``
+    (where the run asked for it): the naming rule's verdict and the identification with
+    the effect (:func:`~itr_identify.reporting.naming_words.headline_entry`)."""
     flags = {p: {n: parameter_flag(i, n) for n in i.posterior.names}
              for p, i in idents.items()}
     choice = parametrisation_choice(idents, flags)
@@ -389,7 +393,8 @@ def headline(idents: Mapping[str, Identification]) -> dict:
             "parameters": params,
             "fit": {p: {k: i.fit[k] for k in ("chi2", "dof", "p", "misfit", "model_form_sd")
                         if k in i.fit} | ({"note": misfit_note(i.fit)} if i.fit else {})
-                    for p, i in idents.items()}}
+                    for p, i in idents.items()}} | (
+        {"discrepancy": dict(discrepancy)} if discrepancy else {})
 
 
 def _corrected_by(gap: Identification | None) -> str:
@@ -461,6 +466,8 @@ def headline_lines(head: dict, width: int = 100) -> list[str]:
                 lines.append(f"    * {e['caveat']}")
         if head.get("fit", {}).get(par, {}).get("note"):
             lines += wrap("  " + head["fit"][par]["note"], subsequent_indent="    ")
+    for line in headline_entry_lines(head.get("discrepancy", {})):
+        lines += wrap(line, subsequent_indent="    ")
     lines += wrap(f"quote {head['quote']}: {head['why']}.")
     lines += wrap(f"These hold at fidelity {head['fidelity']} ({head['holds_at']}); the "
                   "report's error budget gives what the RVE leaves out. " + _legend(head))
@@ -490,6 +497,8 @@ def headline_markdown(head: dict) -> list[str]:
     notes = [f"{par}: {f['note']}" for par, f in head.get("fit", {}).items() if f.get("note")]
     if notes:
         lines += [""] + [f"- {n}" for n in notes]
+    if head.get("discrepancy"):
+        lines += [""] + [f"- {n}" for n in headline_entry_lines(head["discrepancy"])]
     inputs = [(par, n, e) for par, params in head["parameters"].items()
               for n, e in params.items() if e.get("variance_shares")]
     if inputs:

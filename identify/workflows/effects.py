@@ -17,6 +17,7 @@ from ..reporting.figures import effect_residual_figure
 from ..reporting.naming_words import (
     candidate_lines,
     effect_fit_lines,
+    headline_entry,
     rule_sentence,
     verdict_sentence,
 )
@@ -38,26 +39,30 @@ def run_effects(ident, out: Path, *, engine: SolveEngine, verdict: bool,
     lines = ["## Discrepancy: the identification's model against the library's effects", ""]
     files: list[Path] = []
     v = None
+    built: dict = {}
     if verdict:
         echo(f"discrepancy: the {len(JOINT_EFFECTS)} library effects on the gap "
              "identification's joint model (ratio tables on its first replicas; base and "
              "candidates without the model form)")
         with tqdm(total=n_solves(ident, JOINT_EFFECTS), desc="effect ratio solves",
                   unit="solve", disable=not progress) as bar:
-            v = name_on(ident, keys=JOINT_EFFECTS, engine=engine, settings=settings,
-                        tick=bar.update)
+            built = {e.key: e for e in effects_of(ident, JOINT_EFFECTS, engine=engine,
+                                                  tick=bar.update)}
+        v = name_on(ident, list(built.values()), settings=settings)
         record["verdict"] = v.to_dict()
         lines += [rule_sentence(v), "", verdict_sentence(v), ""] + candidate_lines(v) + [""]
         echo(f"discrepancy: {v.verdict}" + (f" ({v.named})" if v.named else ""))
+    if v is not None:
+        record["headline"] = headline_entry(v)
     key = effect or (v.named if v is not None else None)
     if key is not None:
-        e, = effects_of(ident, [key], engine=engine)
+        e = built.get(key) or effects_of(ident, [key], engine=engine)[0]
         echo(f"discrepancy: the identification with {e.name} beside the base model")
-        fit = with_effect(ident, e, settings=settings,
-                          base=v.base if v is not None else None)
+        fit = with_effect(ident, e, settings=settings)
         record["effect_fit"] = fit.to_dict()
         fig = effect_residual_figure(fit, out / "effect_residuals.png")
         files.append(fig)
+        record["headline"] = headline_entry(v, fit)
         lines += [f"### With {e.name}" + ("" if v is None or v.named == key
                                           else " (asked for; not named by the rule)"), "",
                   *effect_fit_lines(fit), "",

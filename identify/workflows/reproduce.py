@@ -303,7 +303,7 @@ def _reproduce(settings: ReproduceSettings, out: Path, progress: bool,
     files += extra[2]
     fields = drop_fields(engine, keep_fields, echo)
     files.append(write_solves(list(idents.values()), out / "full_solves.parquet"))
-    head = headline(idents)
+    head = headline(idents, discrepancy=extra[0].get("headline"))
     data = {"headline": head}
     data.update({p: {**report.identified_dict(i), "validation": validation[p],
                      "leave_one_out": lofo.get(p, [])} for p, i in idents.items()})
@@ -444,7 +444,7 @@ def _identify_report(meas: Measurements, settings: ReproduceSettings, out: Path,
                      idents: dict[str, Identification], t0: float,
                      echo: Callable[[str], None],
                      extra: tuple[dict, list[str], list[Path]] = ({}, [], [])) -> list[Path]:
-    head = headline(idents)
+    head = headline(idents, discrepancy=extra[0].get("headline"))
     data = {"headline": head}
     data.update({p: report.identified_dict(i) for p, i in idents.items()})
     if extra[0]:
