@@ -286,7 +286,7 @@ class JointSpace:
         """Log prior density (N,) of the points ``theta`` (N, D); -inf outside."""
         uni, nor, a, b, const = self._prior_arrays
         x = theta.T
-        with np.errstate(invalid="ignore"):
+        with np.errstate(divide="ignore", invalid="ignore"):   # branches not taken
             terms = np.where(uni, np.where((x >= a) & (x <= b), const, -np.inf),
                              np.where(nor, -0.5 * ((x - a) / b) ** 2 - const,
                                       np.where(x >= 0, -0.5 * (x / b) ** 2 + const,
