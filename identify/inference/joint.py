@@ -57,6 +57,7 @@ from scipy import special
 
 from ..forward.model import ForwardModel
 from .calibrate import log_likelihood, variance
+from .chunked import map_chunks
 from .effect_terms import BoundEffect, JointEffect
 from .marginal import DRAWS as MARGINAL_DRAWS
 from .marginal import GRID as MARGINAL_GRID
@@ -284,13 +285,17 @@ class JointSpace:
 
     def log_prior(self, theta: np.ndarray) -> np.ndarray:
         """Log prior density (N,) of the points ``theta`` (N, D); -inf outside."""
-        uni, nor, a, b, const = self._prior_arrays
+        uni, nor, half, a, b, const = self._prior_arrays
         x = theta.T
-        with np.errstate(divide="ignore", invalid="ignore"):   # branches not taken
-            terms = np.where(uni, np.where((x >= a) & (x <= b), const, -np.inf),
-                             np.where(nor, -0.5 * ((x - a) / b) ** 2 - const,
-                                      np.where(x >= 0, -0.5 * (x / b) ** 2 + const,
-                                               -np.inf)))
+        terms = np.empty(x.shape)
+        if uni.size:
+            xu = x[uni]
+            terms[uni] = np.where((xu >= a[uni]) & (xu <= b[uni]), const[uni], -np.inf)
+        if nor.size:
+            terms[nor] = -0.5 * ((x[nor] - a[nor]) / b[nor]) ** 2 - const[nor]
+        if half.size:
+            xh = x[half]
+            terms[half] = np.where(xh >= 0, -0.5 * (xh / b[half]) ** 2 + const[half], -np.inf)
         out = np.zeros(theta.shape[0])
         for row in terms:           # parameter by parameter, the sum's order kept
             out += row
@@ -298,18 +303,19 @@ class JointSpace:
 
     @property
     def _prior_arrays(self) -> tuple[np.ndarray, ...]:
-        """(uniform?, normal?, a, b, the log density's constant), each (D, 1)."""
+        """(uniform, normal and half-normal parameters' indices, a, b, the log density's
+        constant), the last three (D, 1)."""
         got = self.__dict__.get("_prior_cache")
         if got is None:
-            col = lambda v: np.asarray(v)[:, None]  # noqa: E731 - (D, 1) columns
+            col = lambda v: np.asarray(v, dtype=float)[:, None]  # noqa: E731 - (D, 1)
             const = [-math.log(b - a) if k == "uniform" else
                      math.log(b * math.sqrt(2 * math.pi)) if k == "normal" else
                      math.log(math.sqrt(2 / math.pi) / b)
                      for k, a, b in zip(self.kinds, self.a, self.b)]
-            got = (col([k == "uniform" for k in self.kinds]),
-                   col([k == "normal" for k in self.kinds]),
-                   col(np.asarray(self.a, dtype=float)), col(np.asarray(self.b, dtype=float)),
-                   col(np.asarray(const, dtype=float)))
+            kinds = np.array(self.kinds)
+            got = (np.flatnonzero(kinds == "uniform"), np.flatnonzero(kinds == "normal"),
+                   np.flatnonzero((kinds != "uniform") & (kinds != "normal")),
+                   col(self.a), col(self.b), col(const))
             object.__setattr__(self, "_prior_cache", got)
         return got
 
@@ -868,13 +874,15 @@ REFINE_ROUNDS = 2
 
 
 def refine(likelihood: JointLikelihood, chain: np.ndarray, *, seed: int,
-           draws: int = REFINE_DRAWS) -> tuple[np.ndarray, np.ndarray, float, float, float]:
+           draws: int = REFINE_DRAWS
+           ) -> tuple[np.ndarray, np.ndarray, float, float, float, np.ndarray]:
     """Importance sampling from a multivariate t (``REFINE_DF`` dof) fitted to the chain's
     draws (their mean and covariance times ``REFINE_INFLATE``, refitted once on the
     weighted draws): ``draws`` points, each weighted by posterior over proposal, evaluated
     together. The mean weight is the evidence ``Z`` (the prior normalised), with its
     Monte-Carlo standard error; the weights' effective number says how far to trust it.
-    Returns (draws, normalised weights, effective draws, ln Z, its standard error)."""
+    Returns (draws, normalised weights, effective draws, ln Z, its standard error, the
+    draws' log posterior)."""
     rng = np.random.default_rng(seed + 7919)
     mu = chain.mean(axis=0)
     cov = np.atleast_2d(np.cov(chain, rowvar=False))
@@ -892,7 +900,7 @@ def refine(likelihood: JointLikelihood, chain: np.ndarray, *, seed: int,
 
 def _importance(likelihood: JointLikelihood, mu: np.ndarray, cov: np.ndarray,
                 rng: np.random.Generator, draws: int
-                ) -> tuple[np.ndarray, np.ndarray, float, float, float]:
+                ) -> tuple[np.ndarray, np.ndarray, float, float, float, np.ndarray]:
     """One round of :func:`refine` with the t proposal of centre ``mu``, scale ``cov``."""
     dim = mu.size
     L = np.linalg.cholesky(cov + 1e-12 * np.eye(dim) * np.trace(cov) / dim)
@@ -903,8 +911,7 @@ def _importance(likelihood: JointLikelihood, mu: np.ndarray, cov: np.ndarray,
     logq = (special.gammaln((REFINE_DF + dim) / 2) - special.gammaln(REFINE_DF / 2)
             - 0.5 * dim * math.log(REFINE_DF * math.pi) - np.sum(np.log(np.diag(L)))
             - 0.5 * (REFINE_DF + dim) * np.log1p(r2 / REFINE_DF))
-    logp = np.concatenate([likelihood.log_posterior(x[i:i + 20000])
-                           for i in range(0, draws, 20000)])
+    logp = np.concatenate(list(map_chunks(likelihood.log_posterior, x, chunk=20000)))
     logw = logp - logq
     top = np.max(logw)
     w = np.exp(logw - top)
@@ -912,7 +919,7 @@ def _importance(likelihood: JointLikelihood, mu: np.ndarray, cov: np.ndarray,
     ln_z = top + math.log(mean_w)
     se = float(w.std(ddof=1) / math.sqrt(draws) / mean_w)
     w /= w.sum()
-    return x, w, float(1 / np.sum(w ** 2)), ln_z, se
+    return x, w, float(1 / np.sum(w ** 2)), ln_z, se, logp
 
 
 def _autocorr(chain: np.ndarray) -> np.ndarray:
@@ -1001,8 +1008,8 @@ def sample(likelihood: JointLikelihood, *, seed: int = 0, walkers: int | None = 
     chain = sampler.get_chain(discard=discard, flat=True)
     logp = sampler.get_log_prob(discard=discard, flat=True)
     ll = logp - space.log_prior(chain)
-    x, w, ess, ln_z, ln_z_se = refine(likelihood, chain, seed=seed,
-                                      draws=evidence_draws or REFINE_PER_TARGET * TARGET_DRAWS)
+    x, w, ess, ln_z, ln_z_se, logp_x = refine(
+        likelihood, chain, seed=seed, draws=evidence_draws or REFINE_PER_TARGET * TARGET_DRAWS)
     weights = np.full(chain.shape[0], 1.0 / chain.shape[0])
     source = "chain"
     if target is None and ess >= TARGET_DRAWS:
@@ -1010,7 +1017,7 @@ def sample(likelihood: JointLikelihood, *, seed: int = 0, walkers: int | None = 
         # target, they are the posterior (their error is the weights' effective number)
         keep = w > 0
         chain, weights = x[keep], w[keep] / w[keep].sum()
-        ll = likelihood.log_posterior(chain) - space.log_prior(chain)
+        ll = logp_x[keep] - space.log_prior(chain)
         worth, source = ess, "importance"
     post = JointPosterior(space.names, chain, weights, dict(space.held), ll,
                           dict(zip(space.names, map(float, tau))),

@@ -19,6 +19,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .chunked import map_chunks
+
 __all__ = ["DRAWS", "GRID", "Marginal", "rao_blackwell"]
 
 #: Posterior draws whose conditional densities are averaged (as many as the joint sampler's
@@ -117,13 +119,18 @@ def rao_blackwell(log_posterior: Callable[[np.ndarray], np.ndarray], theta: np.n
     if c.shape != (theta.shape[0],) or np.any(c < 0) or not c.sum() > 0:
         raise ValueError("counts: one non-negative count per draw, not all zero")
     x = np.linspace(lo, hi, grid)
-    rows = max(1, CHUNK // grid)              # draws whose grids make one call
-    total = np.zeros(grid)
-    for i in range(0, theta.shape[0], rows):
-        pts = np.repeat(theta[i:i + rows], grid, axis=0)
+
+    def part(block: np.ndarray) -> np.ndarray:
+        """Draws (with their counts in the last column): their conditionals, summed."""
+        pts = np.repeat(block[:, :-1], grid, axis=0)
         pts[:, column] = np.tile(x, pts.shape[0] // grid)
         lp = np.asarray(log_posterior(pts), float).reshape(-1, grid)
         dens = np.exp(lp - lp.max(axis=1, keepdims=True))
         mass = np.sum(0.5 * (dens[:, 1:] + dens[:, :-1]) * np.diff(x), axis=1)
-        total += c[i:i + rows] @ (dens / mass[:, None])
+        return block[:, -1] @ (dens / mass[:, None])
+
+    total = np.zeros(grid)
+    # draws whose grids make one call, on the process's threads, summed in order
+    for piece in map_chunks(part, np.column_stack([theta, c]), chunk=max(1, CHUNK // grid)):
+        total += piece
     return Marginal(x, total / c.sum())
