@@ -50,6 +50,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -301,23 +302,19 @@ class JointSpace:
             out += row
         return out
 
-    @property
+    @cached_property
     def _prior_arrays(self) -> tuple[np.ndarray, ...]:
         """(uniform, normal and half-normal parameters' indices, a, b, the log density's
         constant), the last three (D, 1)."""
-        got = self.__dict__.get("_prior_cache")
-        if got is None:
-            col = lambda v: np.asarray(v, dtype=float)[:, None]  # noqa: E731 - (D, 1)
-            const = [-math.log(b - a) if k == "uniform" else
-                     math.log(b * math.sqrt(2 * math.pi)) if k == "normal" else
-                     math.log(math.sqrt(2 / math.pi) / b)
-                     for k, a, b in zip(self.kinds, self.a, self.b)]
-            kinds = np.array(self.kinds)
-            got = (np.flatnonzero(kinds == "uniform"), np.flatnonzero(kinds == "normal"),
-                   np.flatnonzero((kinds != "uniform") & (kinds != "normal")),
-                   col(self.a), col(self.b), col(const))
-            object.__setattr__(self, "_prior_cache", got)
-        return got
+        col = lambda v: np.asarray(v, dtype=float)[:, None]  # noqa: E731 - (D, 1)
+        const = [-math.log(b - a) if k == "uniform" else
+                 math.log(b * math.sqrt(2 * math.pi)) if k == "normal" else
+                 math.log(math.sqrt(2 / math.pi) / b)
+                 for k, a, b in zip(self.kinds, self.a, self.b)]
+        kinds = np.array(self.kinds)
+        return (np.flatnonzero(kinds == "uniform"), np.flatnonzero(kinds == "normal"),
+                np.flatnonzero((kinds != "uniform") & (kinds != "normal")),
+                col(self.a), col(self.b), col(const))
 
     def draw(self, rng: np.random.Generator, n: int) -> np.ndarray:
         """``n`` points from the prior, (n, D)."""
