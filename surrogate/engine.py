@@ -617,6 +617,7 @@ class SolveEngine:
         self.solved = self.repeated = self.earlier = 0
         self._written: set[str] = set()   # keys of the rows this engine solved
         self._worker_builds = 0
+        self._side_processes = 0
         self._local_builds0 = geometry_builds()
         if scheduler:  # refuse an unreachable scheduler before any work
             self._client, self._cluster = open_client(None, scheduler, memory_per_worker=1,
@@ -727,10 +728,29 @@ class SolveEngine:
                 None if d["theta"] is None else np.asarray(d["theta"]), False,
                 d["geometry_built"])
 
+    def counts(self) -> dict[str, Any]:
+        """What this engine did, for another engine on the same store to add
+        (:meth:`absorb`): its full solves, repeats, answers from an earlier run's store, the
+        keys it wrote and its geometry builds."""
+        return {"solved": self.solved, "repeated": self.repeated, "earlier": self.earlier,
+                "written": sorted(self._written), "geometry_builds": self.geometry_builds}
+
+    def absorb(self, counts: Mapping[str, Any]) -> None:
+        """Add the :meth:`counts` of an engine that ran in a side process of this run on the
+        same store (its solves are this run's: a later request for one repeats it)."""
+        with self._lock:
+            self.solved += int(counts["solved"])
+            self.repeated += int(counts["repeated"])
+            self.earlier += int(counts["earlier"])
+            self._written.update(counts["written"])
+            self._worker_builds += int(counts["geometry_builds"])
+            self._side_processes += 1
+
     @property
     def geometry_builds(self) -> int:
         """Discrete problems built since this engine started: in this process (its solves
-        and the reduced bases' problems) plus those the workers report."""
+        and the reduced bases' problems) plus those the workers and side processes
+        report."""
         return geometry_builds() - self._local_builds0 + self._worker_builds
 
     def summary(self) -> str:
@@ -739,7 +759,9 @@ class SolveEngine:
         e.g. ``330 full solves in this process (32 requests repeated a solve of this run),
         none from an earlier run, 24 geometry builds``."""
         where = (f"on scheduler {self.scheduler}" if self.scheduler else
-                 f"on {self.workers} local workers" if self.workers else "in this process")
+                 f"on {self.workers} local workers" if self.workers else
+                 f"in this process and {counted(self._side_processes, 'side process', 'side processes')}"
+                 if self._side_processes else "in this process")
         repeated = (f" ({counted(self.repeated, 'request')} repeated a solve of this run)"
                     if self.repeated else "")
         earlier = (f"{counted(self.earlier, 'request')} from the store of an earlier run"

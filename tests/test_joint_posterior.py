@@ -214,3 +214,134 @@ def test_the_log_prior_is_each_parameters_density_summed_in_order():
     want = np.array([by_hand(x) for x in theta])
     assert np.isinf(want).sum() > 100 and np.isfinite(want).sum() > 50
     np.testing.assert_array_equal(got, want)
+
+
+class _Known:
+    """A posterior known in closed form: independent normal likelihoods (centres ``m``, sds
+    ``s``) of two log10 resistances with uniform priors over -9 to -6 (one inside, one
+    whose likelihood peaks below the floor, so its posterior fills the range's low end) and
+    of one input with a normal prior (sd 0.1)."""
+
+    m = np.array([-7.5, -9.2, 0.05])
+    s = np.array([0.3, 0.8, 0.05])
+
+    def __init__(self):
+        self.space = JointSpace(("u1", "u2", "n"), ("uniform", "uniform", "normal"),
+                                (-9.0, -9.0, 0.0), (-6.0, -6.0, 0.1), {}, {}, "silicone")
+
+    def log_posterior(self, theta):
+        ll = -0.5 * ((theta - self.m) / self.s) ** 2 - np.log(self.s * math.sqrt(2 * math.pi))
+        return self.space.log_prior(theta) + ll.sum(axis=1)
+
+    def ln_z(self) -> float:
+        """The evidence: per uniform parameter the likelihood's mass inside the range over
+        the range's width; the normal one's, the convolution of two normals at its centre."""
+        from scipy import stats
+
+        out = 0.0
+        for m, s in zip(self.m[:2], self.s[:2]):
+            out += math.log((stats.norm.cdf(-6, m, s) - stats.norm.cdf(-9, m, s)) / 3.0)
+        return out + stats.norm.logpdf(self.m[2], 0.0, math.hypot(0.1, self.s[2]))
+
+    def exact(self, n: int, seed: int) -> np.ndarray:
+        """``n`` independent draws of the posterior (truncated normals; the input's product
+        of two normals)."""
+        from scipy import stats
+
+        rng = np.random.default_rng(seed)
+        cols = [stats.truncnorm.rvs((-9 - m) / s, (-6 - m) / s, loc=m, scale=s, size=n,
+                                    random_state=rng) for m, s in zip(self.m[:2], self.s[:2])]
+        v = 1 / (1 / 0.1 ** 2 + 1 / self.s[2] ** 2)
+        cols.append(rng.normal(v * self.m[2] / self.s[2] ** 2, math.sqrt(v), n))
+        return np.column_stack(cols)
+
+
+def test_the_open_map_inverts_and_its_jacobian_is_the_derivative():
+    box = _Known()
+    theta = box.exact(200, seed=1)
+    y = box.space.to_open(theta)
+    back, log_jac = box.space.from_open(y)
+    np.testing.assert_allclose(back, theta, rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(y[:, 2], theta[:, 2])     # a normal one is left as it is
+    h = 1e-6          # central differences of each uniform coordinate's map
+    d = [(box.space.from_open(y + h * e)[0][:, i] - box.space.from_open(y - h * e)[0][:, i])
+         / (2 * h) for i, e in ((0, np.eye(3)[0]), (1, np.eye(3)[1]))]
+    np.testing.assert_allclose(log_jac, np.log(d[0]) + np.log(d[1]), rtol=0, atol=1e-6)
+
+
+def test_importance_draws_give_the_exact_evidence_and_quantiles():
+    """From a chain of the exact posterior, the importance draws' ln Z is the closed form's
+    (within 3 of its standard errors and 0.01), and the weighted quantiles of the
+    floor-bound parameter are the truncated normal's."""
+    from scipy import stats
+
+    from itr_identify.inference.joint import refine, weighted_quantile
+
+    box = _Known()
+    x, w, ess, ln_z, se, _ = refine(box, box.exact(20000, seed=2), seed=3, draws=200_000)
+    assert ess > 0.3 * 200_000
+    assert abs(ln_z - box.ln_z()) < max(3 * se, 1e-3) and abs(ln_z - box.ln_z()) < 0.01
+    q = [0.05, 0.5, 0.95]
+    want = stats.truncnorm.ppf(q, (-9 + 9.2) / 0.8, (-6 + 9.2) / 0.8, loc=-9.2, scale=0.8)
+    np.testing.assert_allclose(weighted_quantile(x[:, 1], q, w), want, atol=0.01)
+
+
+def test_the_chain_stops_where_its_importance_draws_are_worth_the_target():
+    """Where a t fitted to a chain of 20 autocorrelation times is a good proposal, the
+    importance draws are the posterior and the chain stops short of its own rule (50
+    autocorrelation times and the target's worth); the quantiles are the closed form's."""
+    from scipy import stats
+
+    from itr_identify.inference.joint import (
+        CHAIN_TAUS,
+        PROPOSAL_TAUS,
+        TARGET_DRAWS,
+        weighted_quantile,
+    )
+
+    box = _Known()
+    post = sample(box, seed=4, marginals=False)
+    tau = max(post.autocorr.values())
+    assert post.converged and post.source == "importance"
+    assert post.effective_draws >= TARGET_DRAWS
+    # the chain's own rule: 50 autocorrelation times and walkers x steps / tau >= target
+    assert PROPOSAL_TAUS * tau <= post.steps < max(CHAIN_TAUS * tau,
+                                                   TARGET_DRAWS * tau / post.walkers)
+    q = [0.05, 0.5, 0.95]
+    for i, (m, s) in enumerate(zip(box.m[:2], box.s[:2])):
+        want = stats.truncnorm.ppf(q, (-9 - m) / s, (-6 - m) / s, loc=m, scale=s)
+        np.testing.assert_allclose(weighted_quantile(post.samples[:, i], q, post.weights),
+                                   want, atol=0.02)
+    assert abs(post.log_evidence - box.ln_z()) < 0.01
+
+
+def test_the_compiled_table_interpolation_is_numpys_to_the_last_bit():
+    """The likelihood's compiled (bi)linear interpolation gives NumPy's gathers' numbers
+    bit for bit, points outside the axes clipped to the edges."""
+    from itr_identify.inference._table_kernels import linear_1d, linear_2d
+
+    rng = np.random.default_rng(9)
+    values1 = rng.normal(size=(3, 4, 41))
+    values2 = rng.normal(size=(3, 4, 17, 23))
+    ax1 = np.linspace(-9.0, -6.0, 41)
+    ax2 = (np.linspace(-9.0, -6.0, 17), np.linspace(-10.0, -5.0, 23))
+    x = rng.uniform(-9.5, -5.5, (4, 300))
+    y = rng.uniform(-10.5, -4.5, (4, 300))
+    rows = np.arange(4)[:, None]
+
+    def place(v, ax):
+        t = np.clip((v - ax[0]) / (ax[1] - ax[0]), 0.0, ax.size - 1 - 1e-9)
+        i = t.astype(int)
+        return i, t - i
+
+    i, w = place(x, ax1)
+    want1 = values1[:, rows, i] * (1 - w) + values1[:, rows, i + 1] * w
+    got1 = linear_1d(values1, x, ax1[0], ax1[1] - ax1[0], ax1.size - 1 - 1e-9)
+    np.testing.assert_array_equal(got1, want1)
+    (i, a), (j, b) = place(x, ax2[0]), place(y, ax2[1])
+    want2 = ((1 - a) * (1 - b) * values2[:, rows, i, j] + a * (1 - b) * values2[:, rows, i + 1, j]
+             + (1 - a) * b * values2[:, rows, i, j + 1] + a * b * values2[:, rows, i + 1, j + 1])
+    lo = np.array([ax2[0][0], ax2[1][0]])
+    step = np.array([ax2[0][1] - ax2[0][0], ax2[1][1] - ax2[1][0]])
+    last = np.array([16 - 1e-9, 22 - 1e-9])
+    np.testing.assert_array_equal(linear_2d(values2, x, y, lo, step, last), want2)

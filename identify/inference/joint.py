@@ -35,9 +35,13 @@ The sampler is emcee's affine-invariant ensemble (differential-evolution moves),
 because its walkers are evaluated together: the likelihood is vectorised over the ensemble
 (every reduced basis tabulated on a grid in log10 R once), so a posterior with tens of
 thousands of effective samples takes seconds, which the 2 % convergence rule on interval
-ends needs; it is seeded and deterministic. The evidence, where a comparison of models needs
-one, comes from importance sampling over the same likelihood with a t proposal fitted to the
-chain (:func:`refine`), whose weights also polish the chain's quantiles.
+ends needs; it is seeded and deterministic. Once the chain spans 20 autocorrelation times,
+an even mixture of two t fitted to it (one in the parameters, one with each uniform
+parameter on its logit) is the proposal of importance sampling over the same likelihood
+(:func:`refine`): where the weighted draws are worth the
+target they are the posterior and the chain stops (on Table 3 a sixth of the steps the
+chain's own rule needs, the same intervals); else the chain runs on to its own rule. The
+importance weights give the evidence, where a comparison of models needs one.
 
 The resistances' point and interval ends are read from their Rao-Blackwell marginals
 (:mod:`.marginal`: the average of each draw's exact conditional density on a grid), not
@@ -57,6 +61,7 @@ import numpy as np
 from scipy import special
 
 from ..forward.model import ForwardModel
+from ._table_kernels import linear_1d, linear_2d
 from .calibrate import log_likelihood, variance
 from .chunked import map_chunks
 from .effect_terms import BoundEffect, JointEffect
@@ -340,6 +345,35 @@ class JointSpace:
                 out[..., i] = b * special.ndtri(0.5 + 0.5 * u[..., i])
         return out
 
+    def to_open(self, theta: np.ndarray) -> np.ndarray:
+        """The points ``theta`` (N, D) with each uniform parameter mapped from its prior's
+        interval onto the real line (the logit of its place in the interval), the others as
+        they are: the space :func:`refine`'s proposal is fitted in, where a resistance's
+        posterior that fills its prior's range is a bell, not a box."""
+        uni, lo, width = self._open_arrays
+        y = np.array(theta, dtype=float, copy=True)
+        u = np.clip((y[:, uni] - lo) / width, 1e-12, 1 - 1e-12)
+        y[:, uni] = np.log(u) - np.log1p(-u)
+        return y
+
+    def from_open(self, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The inverse of :meth:`to_open`: the points (N, D) and the log of the map's
+        Jacobian determinant ``ln |d theta / d y|`` (N,)."""
+        uni, lo, width = self._open_arrays
+        theta = np.array(y, dtype=float, copy=True)
+        s = special.expit(y[:, uni])
+        theta[:, uni] = lo + width * s
+        with np.errstate(divide="ignore"):
+            log_jac = np.sum(np.log(width) + np.log(s) + np.log1p(-s), axis=1)
+        return theta, log_jac
+
+    @cached_property
+    def _open_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(the uniform parameters' indices, their lower ends, their widths)."""
+        uni = np.flatnonzero(np.array(self.kinds) == "uniform")
+        lo = np.array(self.a, dtype=float)[uni]
+        return uni, lo, np.array(self.b, dtype=float)[uni] - lo
+
     def columns(self, theta: np.ndarray) -> dict[str, np.ndarray]:
         """Every parameter's column (N,) at the points ``theta``, the held ones too."""
         n = theta.shape[0]
@@ -507,21 +541,13 @@ class JointLikelihood:
         n = shift.shape[-1]
         if dim == 0:
             return np.repeat(values[:, :, None], n, axis=2)
-        rows = np.arange(len(idx))[:, None]
-        where = []
-        for d, ax in enumerate(axes):
-            x = np.stack([cols[name] for name in names[d]]) + shift
-            t = np.clip((x - ax[0]) / (ax[1] - ax[0]), 0.0, ax.size - 1 - 1e-9)
-            i = t.astype(int)
-            where.append((i, t - i))
+        at = [np.stack([cols[name] for name in names[d]]) + shift for d in range(dim)]
+        lo = np.array([float(ax[0]) for ax in axes])
+        step = np.array([float(ax[1] - ax[0]) for ax in axes])
+        last = np.array([ax.size - 1 - 1e-9 for ax in axes])
         if dim == 1:
-            (i, w), = where
-            return values[:, rows, i] * (1 - w) + values[:, rows, i + 1] * w
-        (i, a_), (j, b_) = where
-        return ((1 - a_) * (1 - b_) * values[:, rows, i, j]
-                + a_ * (1 - b_) * values[:, rows, i + 1, j]
-                + (1 - a_) * b_ * values[:, rows, i, j + 1]
-                + a_ * b_ * values[:, rows, i + 1, j + 1])
+            return linear_1d(values, at[0], lo[0], step[0], last[0])
+        return linear_2d(values, at[0], at[1], lo, step, last)
 
     def conductivities_all(self, cols: Mapping[str, np.ndarray]
                            ) -> tuple[np.ndarray, np.ndarray]:
@@ -668,8 +694,13 @@ class JointLikelihood:
 
 
 #: Autocorrelation times each parameter's chain must span after burn-in (emcee's rule of
-#: thumb is 50).
+#: thumb is 50) where the chain's draws are the posterior.
 CHAIN_TAUS = 50
+#: Autocorrelation times the chain spans after burn-in before it shapes the importance
+#: proposal (:func:`refine`): its mean and covariance from walkers x 20 independent draws
+#: (4,000 or more); where the importance draws are then worth :data:`TARGET_DRAWS`, they
+#: are the posterior and the chain stops; else it runs on to :data:`CHAIN_TAUS`.
+PROPOSAL_TAUS = 20
 #: Independent draws the chain must be worth: the 5 % and 95 % quantiles of log10 R then
 #: carry a Monte-Carlo error of a few tenths of a per cent of R, and a run twice as long
 #: moves no interval end by more than about 1 %.
@@ -717,7 +748,9 @@ class JointPosterior:
         Mean acceptance fraction of the walkers.
     walkers, steps, burn, seed : int
     converged : bool
-        Whether every chain spans :data:`CHAIN_TAUS` autocorrelation times.
+        Whether the sampler met its rule (:func:`sample`): importance draws worth
+        :data:`TARGET_DRAWS` from a chain spanning :data:`PROPOSAL_TAUS` autocorrelation
+        times, or a chain spanning :data:`CHAIN_TAUS` and worth as many itself.
     effective_draws : float
         What the draws are worth in independent draws (walkers x steps over the longest
         autocorrelation time).
@@ -847,13 +880,14 @@ def marginal_of(likelihood: JointLikelihood, posterior: JointPosterior, name: st
                          lo=float(lo), hi=float(hi), grid=grid, counts=counts[keep])
 
 
-def with_marginals(likelihood: JointLikelihood, posterior: JointPosterior
-                   ) -> JointPosterior:
-    """``posterior`` with the Rao-Blackwell marginals of its resistances attached (seeded
-    by the posterior's seed), which its points and intervals then read."""
+def with_marginals(likelihood: JointLikelihood, posterior: JointPosterior, *,
+                   draws: int = MARGINAL_DRAWS) -> JointPosterior:
+    """``posterior`` with the Rao-Blackwell marginals of its resistances attached (over
+    about ``draws`` of its draws, seeded by the posterior's seed), which its points and
+    intervals then read."""
     names = [n for n in posterior.names if n.startswith("log10 ")]
     return replace(posterior, marginals={
-        n: marginal_of(likelihood, posterior, n, seed=posterior.seed + k)
+        n: marginal_of(likelihood, posterior, n, draws=draws, seed=posterior.seed + k)
         for k, n in enumerate(names)})
 
 
@@ -873,43 +907,77 @@ REFINE_ROUNDS = 2
 def refine(likelihood: JointLikelihood, chain: np.ndarray, *, seed: int,
            draws: int = REFINE_DRAWS
            ) -> tuple[np.ndarray, np.ndarray, float, float, float, np.ndarray]:
-    """Importance sampling from a multivariate t (``REFINE_DF`` dof) fitted to the chain's
-    draws (their mean and covariance times ``REFINE_INFLATE``, refitted once on the
-    weighted draws): ``draws`` points, each weighted by posterior over proposal, evaluated
+    """Importance sampling from an even mixture of two multivariate t (``REFINE_DF`` dof)
+    fitted to the chain's draws (their mean and covariance times ``REFINE_INFLATE``, refitted
+    once on the weighted draws): one in the parameters themselves, one in the space's open
+    coordinates (:meth:`JointSpace.to_open`: each uniform parameter on its logit, where a
+    resistance whose posterior fills its prior's range is a bell, not a box). Each alone
+    misses some of Table 3's posteriors (in the parameters the area posterior's draws are
+    worth a few per cent of the target; on the logit alone the gap posterior's low 5 % end
+    of R_AlN came out 6 % above a long chain's while its weights looked fine); the mixture
+    covers both. ``draws`` points, each weighted by posterior over proposal, evaluated
     together. The mean weight is the evidence ``Z`` (the prior normalised), with its
     Monte-Carlo standard error; the weights' effective number says how far to trust it.
     Returns (draws, normalised weights, effective draws, ln Z, its standard error, the
-    draws' log posterior)."""
+    draws' log posterior) of the round with the most effective draws."""
     rng = np.random.default_rng(seed + 7919)
-    mu = chain.mean(axis=0)
-    cov = np.atleast_2d(np.cov(chain, rowvar=False))
+    space = likelihood.space
+    parts = [_fitted(chain), _fitted(space.to_open(chain))]
     best = None
     for _ in range(REFINE_ROUNDS):   # population Monte Carlo: refit on the weighted draws
-        out = _importance(likelihood, mu, cov * REFINE_INFLATE, rng, draws)
+        out = _importance(likelihood, parts, rng, draws)
         if best is None or out[2] > best[2]:
             best = out
         x, w = out[0], out[1]
-        mu = w @ x
-        d = x - mu
-        cov = (d * w[:, None]).T @ d
+        parts = [_fitted(x, w), _fitted(space.to_open(x), w)]
     return best
 
 
-def _importance(likelihood: JointLikelihood, mu: np.ndarray, cov: np.ndarray,
+def _fitted(x: np.ndarray, w: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(centre, Cholesky factor of the covariance times ``REFINE_INFLATE``) of the draws
+    ``x`` (N, D) with weights ``w`` (None: equal)."""
+    mu = x.mean(axis=0) if w is None else w @ x
+    d = x - mu
+    cov = np.atleast_2d(np.cov(x, rowvar=False) if w is None else (d * w[:, None]).T @ d)
+    dim = mu.size
+    cov = REFINE_INFLATE * cov + 1e-12 * np.eye(dim) * np.trace(cov) / dim
+    return mu, np.linalg.cholesky(cov)
+
+
+def _t_logpdf(y: np.ndarray, mu: np.ndarray, chol: np.ndarray) -> np.ndarray:
+    """Log density (N,) of the multivariate t (``REFINE_DF`` dof) of centre ``mu`` and
+    scale ``chol chol^T`` at the rows of ``y``."""
+    from scipy.linalg import solve_triangular
+
+    dim = mu.size
+    r2 = np.sum(solve_triangular(chol, (y - mu).T, lower=True) ** 2, axis=0)
+    return (special.gammaln((REFINE_DF + dim) / 2) - special.gammaln(REFINE_DF / 2)
+            - 0.5 * dim * math.log(REFINE_DF * math.pi) - np.sum(np.log(np.diag(chol)))
+            - 0.5 * (REFINE_DF + dim) * np.log1p(r2 / REFINE_DF))
+
+
+def _importance(likelihood: JointLikelihood, parts: list[tuple[np.ndarray, np.ndarray]],
                 rng: np.random.Generator, draws: int
                 ) -> tuple[np.ndarray, np.ndarray, float, float, float, np.ndarray]:
-    """One round of :func:`refine` with the t proposal of centre ``mu``, scale ``cov``."""
-    dim = mu.size
-    L = np.linalg.cholesky(cov + 1e-12 * np.eye(dim) * np.trace(cov) / dim)
+    """One round of :func:`refine` with its two t (``parts``: in the parameters, in the
+    open coordinates), half the draws from each."""
+    space = likelihood.space
+    (mu_x, l_x), (mu_y, l_y) = parts
+    dim = mu_x.size
+    half = draws // 2
     z = rng.standard_normal((draws, dim))
     u = rng.chisquare(REFINE_DF, draws) / REFINE_DF
-    x = mu + (z @ L.T) / np.sqrt(u)[:, None]
-    r2 = np.sum(z ** 2, axis=1) / u             # Mahalanobis distance of each draw
-    logq = (special.gammaln((REFINE_DF + dim) / 2) - special.gammaln(REFINE_DF / 2)
-            - 0.5 * dim * math.log(REFINE_DF * math.pi) - np.sum(np.log(np.diag(L)))
-            - 0.5 * (REFINE_DF + dim) * np.log1p(r2 / REFINE_DF))
+    x = np.vstack([mu_x + (z[:half] @ l_x.T) / np.sqrt(u[:half])[:, None],
+                   space.from_open(mu_y + (z[half:] @ l_y.T) / np.sqrt(u[half:])[:, None])[0]])
+    uni, lo, width = space._open_arrays
+    inside = np.all((x[:, uni] > lo) & (x[:, uni] < lo + width), axis=1)
+    y = space.to_open(x)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        open_part = np.where(inside, _t_logpdf(y, mu_y, l_y) - space.from_open(y)[1], -np.inf)
+        logq = np.logaddexp(_t_logpdf(x, mu_x, l_x), open_part) - math.log(2)
     logp = np.concatenate(list(map_chunks(likelihood.log_posterior, x, chunk=20000)))
-    logw = logp - logq
+    with np.errstate(invalid="ignore"):
+        logw = np.where(np.isfinite(logp), logp - logq, -np.inf)
     top = np.max(logw)
     w = np.exp(logw - top)
     mean_w = w.mean()
@@ -948,24 +1016,28 @@ def _start(likelihood: JointLikelihood, rng: np.random.Generator, walkers: int
 def sample(likelihood: JointLikelihood, *, seed: int = 0, walkers: int | None = None,
            steps: int | None = None, burn: int | None = None,
            progress: bool = False, marginals: bool = True,
-           evidence_draws: int | None = None) -> JointPosterior:
+           evidence_draws: int | None = None,
+           marginal_draws: int = MARGINAL_DRAWS) -> JointPosterior:
     """Sample the posterior of ``likelihood`` (its space's priors) with emcee: ``walkers``
     (default :data:`WALKERS_PER_DIM` per dimension, at least :data:`WALKERS_MIN`)
     differential-evolution walkers, seeded; by default a first round of :data:`ROUND_STEPS`
-    steps, then rounds of what the autocorrelation says the rule needs, until, after a
-    burn-in of a third of the steps, every parameter's chain spans :data:`CHAIN_TAUS`
-    autocorrelation times and the draws are worth :data:`TARGET_DRAWS` independent ones
-    (walkers x steps over the longest autocorrelation time), at most :data:`MAX_STEPS`
-    (then ``converged`` is False and the caller says so); ``steps``: run exactly that many
-    after ``burn``. The evidence is then estimated by importance sampling from a t fitted
-    to the chain (:func:`refine`), whose independent weighted draws are the posterior where
-    they are worth :data:`TARGET_DRAWS` (``source``); the resistances' marginals are then
-    attached (:func:`with_marginals`) unless ``marginals`` is False (a posterior whose
-    resistance quantiles nobody quotes); ``evidence_draws``: the importance draws of the
-    evidence (default :data:`REFINE_PER_TARGET` x :data:`TARGET_DRAWS`). ``progress``: a bar
-    over the steps
-    whose total is, after each round, the steps the rule is expected to need (so its ETA
-    is the sampler's)."""
+    steps, then rounds of what the autocorrelation says the rule needs (after a burn-in of
+    a third of the steps). Once every parameter's chain spans :data:`PROPOSAL_TAUS`
+    autocorrelation times, a t fitted to it is the proposal of importance sampling
+    (:func:`refine`, ``evidence_draws`` draws, default :data:`REFINE_PER_TARGET` x
+    :data:`TARGET_DRAWS`); where its weighted draws are worth :data:`TARGET_DRAWS`
+    independent ones they are the posterior (``source`` ``importance``) and the chain
+    stops; else the chain runs on until it spans :data:`CHAIN_TAUS` autocorrelation times
+    and is worth :data:`TARGET_DRAWS` draws itself (walkers x steps over the longest
+    autocorrelation time; ``source`` ``chain``, or ``importance`` where a refit on the
+    longer chain reaches the target), at most :data:`MAX_STEPS` (then ``converged`` is
+    False and the caller says so). ``steps``: run exactly that many after ``burn`` (the
+    chain's draws are then the posterior; the importance draws give the evidence). The
+    resistances' marginals are then attached (:func:`with_marginals`, over
+    ``marginal_draws`` draws) unless ``marginals`` is False (a posterior whose resistance
+    quantiles nobody quotes). ``progress``: a bar
+    over the steps whose total is, after each round, the steps the rule is expected to
+    need (so its ETA     is the sampler's)."""
     import emcee
     from tqdm.auto import tqdm
 
@@ -979,6 +1051,8 @@ def sample(likelihood: JointLikelihood, *, seed: int = 0, walkers: int | None = 
     sampler.random_state = np.random.RandomState(seed).get_state()
     state, total, n = start, 0, ROUND_STEPS
     target = steps + (burn or 0) if steps is not None else None
+    evidence_draws = evidence_draws or REFINE_PER_TARGET * TARGET_DRAWS
+    refined, refined_at = None, 0   # the importance draws, once the chain spans PROPOSAL_TAUS
     bar = tqdm(total=target or ROUND_STEPS, desc="joint posterior", unit="step",
                disable=not progress, leave=False)
     while True:
@@ -991,12 +1065,21 @@ def sample(likelihood: JointLikelihood, *, seed: int = 0, walkers: int | None = 
         kept = total - discard
         worth = walkers * kept / max(float(np.max(tau)), 1.0)
         converged = bool(np.all(kept >= CHAIN_TAUS * tau) and worth >= TARGET_DRAWS)
+        if target is None and refined is None and np.all(kept >= PROPOSAL_TAUS * tau):
+            refined = refine(likelihood, sampler.get_chain(discard=discard, flat=True),
+                             seed=seed, draws=evidence_draws)
+            refined_at = total
+            if refined[2] >= TARGET_DRAWS:     # the draws the posterior is read from
+                converged = True
+                break
         if target is not None or converged or total >= MAX_STEPS:
             break
         # the steps the rule needs at this autocorrelation (kept is two thirds of the total),
-        # run in one go (each check of the autocorrelation costs a pass over the chain)
-        need = 1.5 * max(CHAIN_TAUS * float(np.max(tau)),
-                         TARGET_DRAWS * float(np.max(tau)) / walkers)
+        # run in one go (each check of the autocorrelation costs a pass over the chain): a
+        # proposal's chain first, the chain's own rule where its importance draws fell short
+        need = 1.5 * (max(CHAIN_TAUS * float(np.max(tau)),
+                          TARGET_DRAWS * float(np.max(tau)) / walkers)
+                      if refined is not None else PROPOSAL_TAUS * float(np.max(tau)))
         n = int(min(MAX_STEPS - total, max(ROUND_STEPS, 1.1 * need - total)))
         bar.total = total + n
         bar.set_postfix(tau=f"{np.max(tau):.0f}", worth=f"{worth:.0f}")
@@ -1005,8 +1088,9 @@ def sample(likelihood: JointLikelihood, *, seed: int = 0, walkers: int | None = 
     chain = sampler.get_chain(discard=discard, flat=True)
     logp = sampler.get_log_prob(discard=discard, flat=True)
     ll = logp - space.log_prior(chain)
-    x, w, ess, ln_z, ln_z_se, logp_x = refine(
-        likelihood, chain, seed=seed, draws=evidence_draws or REFINE_PER_TARGET * TARGET_DRAWS)
+    if refined is None or (refined[2] < TARGET_DRAWS and refined_at < total):
+        refined = refine(likelihood, chain, seed=seed, draws=evidence_draws)
+    x, w, ess, ln_z, ln_z_se, logp_x = refined
     weights = np.full(chain.shape[0], 1.0 / chain.shape[0])
     source = "chain"
     if target is None and ess >= TARGET_DRAWS:
@@ -1020,4 +1104,4 @@ def sample(likelihood: JointLikelihood, *, seed: int = 0, walkers: int | None = 
                           dict(zip(space.names, map(float, tau))),
                           float(np.mean(sampler.acceptance_fraction)), walkers, kept,
                           discard, seed, converged, worth, ln_z, ln_z_se, source)
-    return with_marginals(likelihood, post) if marginals else post
+    return with_marginals(likelihood, post, draws=marginal_draws) if marginals else post

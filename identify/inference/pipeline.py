@@ -309,7 +309,7 @@ def identify(measurements: Measurements, parametrisation: str = "gap", *,
         nominal = post
         elastic = elasticities(models, post.best, film=film) if priors else {}
         jp, _ = run_joint(models, measurements, priors, elastic, resistance=resistance,
-                          model_form=model_form, seed=seed, progress=True)
+                          model_form=model_form, seed=seed, progress=progress)
         post = as_posterior(jp, resistance=resistance, stages=nominal.stages)
         free = fit_with_inputs_free(
             likelihood_of(models, measurements, priors, elastic, resistance=resistance,

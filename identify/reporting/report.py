@@ -13,7 +13,7 @@ from itr_fv.rve.spec import SEED_STRIDE
 from itr_fv.solvers.choice import solver_choice
 
 from ..inference.free_inputs_fit import describe as describe_free
-from ..inference.joint import CHAIN_TAUS
+from ..inference.joint import CHAIN_TAUS, PROPOSAL_TAUS
 from ..inference.measurements import Measurements
 from ..inference.pipeline import Identification
 from .error_budget import error_budget, error_budget_lines
@@ -400,9 +400,7 @@ def joint_lines(idents: Mapping[str, Identification]) -> list[str]:
                   f"{sampler.get('walkers')} walkers, {sampler.get('steps')} steps after "
                   f"{sampler.get('burn')} of burn-in, longest autocorrelation "
                   f"{max(jp.autocorr.values()):.0f} steps, "
-                  + (f"converged (every chain spans {CHAIN_TAUS} autocorrelation times, worth "
-                     f"{jp.effective_draws:.0f} independent draws)" if jp.converged
-                     else "NOT converged") + ".",
+                  + (_convergence(jp) if jp.converged else "NOT converged") + ".",
                   "",
                   f"Priors: each resistance log-uniform over {lo_p:g} - {hi_p:g} m^2 K/W "
                   "(`itr_identify.inference.priors`); the conductivities lognormal about the "
@@ -536,3 +534,13 @@ def difference_lines(idents: Mapping[str, Identification]) -> list[str]:
               "paper's same-filler and Al2O3-AlN contact resistances have no counterpart "
               "there, so its hybrids are predicted, not fitted."]
     return lines
+
+
+def _convergence(jp) -> str:
+    """How a converged joint posterior met its rule (:func:`~..inference.joint.sample`)."""
+    if jp.source == "importance":
+        return (f"converged (importance draws from a t fitted to a chain spanning "
+                f"{PROPOSAL_TAUS} or more of its autocorrelation times as estimated on it, worth "
+                f"{jp.effective_draws:.0f} independent draws)")
+    return (f"converged (every chain spans {CHAIN_TAUS} autocorrelation times, worth "
+            f"{jp.effective_draws:.0f} independent draws)")

@@ -39,7 +39,8 @@ from ..inference.formulations import fractions_of
 from ..inference.joint_fit import mark_predictive
 from ..inference.measurements import Measurements, read_measurements
 from ..inference.pipeline import Identification, identify
-from ..inference.validate import leave_one_out, validate
+from ..inference.validate import leave_one_out as calibrated_leave_one_out
+from ..inference.validate import validate
 from ..reporting import figures, report
 from ..reporting.headline import headline, headline_lines, headline_markdown
 from ..reporting.level import runs_record
@@ -206,23 +207,90 @@ def open_engine(out: Path, *, workers: int | None = None, scheduler: str | None 
 
 
 def _identify_all(meas: Measurements, settings: ReproduceSettings, progress: bool,
-                  echo: Callable[[str], None], engine: SolveEngine) -> dict[str, Identification]:
-    idents = {}
-    for par in settings.parametrisations:
-        echo(f"{par}: RVEs, reduced bases and RVE scatter of "
-             f"{counted(len(meas.formulations), 'formulation')}")
-        system = settings.forward.system
-        phases = {system.matrix, *(f for name in meas.formulations
-                                   for f in fractions_of(name, system))}
-        idents[par] = identify(meas, par, settings=settings.forward,
-                               grid_points=settings.grid_points, seed=settings.seed,
-                               progress=progress, echo=echo, engine=engine,
-                               inputs=settings.input_priors(phases))
-        post = idents[par].posterior
-        best = ", ".join(f"{n} {v:.2e} (90 % {post.interval(n)[0]:.2e} - "
-                         f"{post.interval(n)[1]:.2e})" for n, v in post.best.items())
-        echo(f"{par}: identified {best} (m^2 K/W)")
-    return idents
+                  echo: Callable[[str], None], engine: SolveEngine, *,
+                  validation: bool = False, leave_one_out: bool = False) -> dict[str, dict]:
+    """Every parametrisation of ``settings`` identified, side by side in processes of their
+    own where the machine allows (:mod:`.side_processes`), else one after the other; with
+    ``validation``, each one's full-solve validation at its quoted values, with
+    ``leave_one_out``, each joint identification's leave-one-formulation-out too. Returns
+    per parametrisation :func:`_identify_one`'s dict."""
+    from .side_processes import identify_side_by_side, side_by_side_possible, tie_to
+
+    pars = list(settings.parametrisations)
+    kwargs = {"meas": meas, "settings": settings, "validation": validation,
+              "leave_one_out": leave_one_out}
+    if not side_by_side_possible(len(pars), distributed=engine.distributed):
+        return {par: _identify_one(par, progress=progress, echo=echo, engine=engine, **kwargs)
+                for par in pars}
+    echo(f"{' and '.join(pars)}: identified side by side, one process each "
+         "(solves on one thread each)")
+    outs = identify_side_by_side(_identify_in_side_process, pars, echo=echo,
+                                 store=engine.store.folder if engine.store else None,
+                                 **kwargs)
+    for out in outs.values():
+        tie_to(out["ident"].models, engine)
+        engine.absorb(out.pop("engine_counts"))
+    return outs
+
+
+def _identify_in_side_process(par: str, *, store: Path | None, echo: Callable[[str], None],
+                              **kwargs) -> dict:
+    """:func:`_identify_one` in a side process: its own engine on the run's store, the
+    models untied from it for the trip back (:func:`.side_processes.tie_to`)."""
+    engine = SolveEngine(store, echo=echo)
+    out = _identify_one(par, progress=False, echo=echo, engine=engine, **kwargs)
+    for m in out["ident"].models.values():
+        m.engine = None
+    out["engine_counts"] = engine.counts()
+    return out
+
+
+def _identify_one(par: str, *, meas: Measurements, settings: ReproduceSettings,
+                  progress: bool, echo: Callable[[str], None], engine: SolveEngine,
+                  validation: bool, leave_one_out: bool) -> dict:
+    """One parametrisation identified; with ``validation`` its full-solve validation, with
+    ``leave_one_out`` its leave-one-formulation-out. Returns ``{"ident", "validation",
+    "lofo"}`` (None where not run) and ``seconds`` per stage."""
+    t = time.perf_counter()
+    echo(f"{par}: RVEs, reduced bases and RVE scatter of "
+         f"{counted(len(meas.formulations), 'formulation')}")
+    system = settings.forward.system
+    phases = {system.matrix, *(f for name in meas.formulations
+                               for f in fractions_of(name, system))}
+    ident = identify(meas, par, settings=settings.forward, grid_points=settings.grid_points,
+                     seed=settings.seed, progress=progress, echo=echo, engine=engine,
+                     inputs=settings.input_priors(phases))
+    post = ident.posterior
+    best = ", ".join(f"{n} {v:.2e} (90 % {post.interval(n)[0]:.2e} - "
+                     f"{post.interval(n)[1]:.2e})" for n, v in post.best.items())
+    echo(f"{par}: identified {best} (m^2 K/W)")
+    out = {"ident": ident, "validation": None, "lofo": None,
+           "seconds": {"identification": time.perf_counter() - t}}
+    if validation:
+        t = time.perf_counter()
+        n = len(ident.models) * settings.forward.replicas
+        echo(f"{par}: validation: full solves of {settings.forward.replicas} RVEs x 3 "
+             "directions per formulation at the identified values")
+        with _bar(n, f"{par} validation solves", progress) as bar:
+            out["validation"] = validate(ident.models, ident.quoted, meas,
+                                         tick=lambda: bar.update(1))
+        if ident.joint is not None:
+            mark_predictive(out["validation"], ident)
+        out["seconds"]["validation"] = time.perf_counter() - t
+    if leave_one_out:
+        t = time.perf_counter()
+        echo(f"{par}: leave one formulation out: each held out, the rest "
+             + ("the joint posterior without the model form, reweighted"
+                if ident.joint is not None else "calibrated") + ", the held-out one predicted")
+        with _bar(len(ident.models), f"{par} leave-one-out", progress and ident.joint is None,
+                  unit="formulation") as bar:
+            out["lofo"] = (ident.leave_one_out(seed=settings.seed) if ident.joint is not None
+                           else calibrated_leave_one_out(
+                               ident.models, meas, grid_points=settings.grid_points,
+                               seed=settings.seed, prior=ident.posterior.prior,
+                               tick=lambda: bar.update(1)))
+        out["seconds"]["leave-one-formulation-out"] = time.perf_counter() - t
+    return out
 
 
 def run_reproduce(settings: ReproduceSettings, out: Path, *, progress: bool = True,
@@ -266,35 +334,14 @@ def _reproduce(settings: ReproduceSettings, out: Path, progress: bool,
                keep_fields: bool) -> list[Path]:
     t0 = time.perf_counter()
     meas = read_measurements()
-    idents = _identify_all(meas, settings, progress, echo, engine)
+    outs = _identify_all(meas, settings, progress, echo, engine, validation=True,
+                         leave_one_out=settings.leave_one_out)
+    idents = {p: o["ident"] for p, o in outs.items()}
+    validation = {p: o["validation"] for p, o in outs.items()}
+    lofo = {p: o["lofo"] for p, o in outs.items() if o["lofo"] is not None}
+    stages = {s: [o["seconds"].get(s, 0.0) for o in outs.values()]
+              for s in ("validation", "leave-one-formulation-out")}
     t_ident = time.perf_counter() - t0
-    validation, lofo = {}, {}
-    n_val = sum(len(i.models) for i in idents.values()) * settings.forward.replicas
-    t = time.perf_counter()
-    echo(f"validation: full solves of {settings.forward.replicas} RVEs x 3 directions per "
-         "formulation at the identified values")
-    with _bar(n_val, "validation solves", progress) as bar:
-        for par, ident in idents.items():
-            point = ident.quoted
-            validation[par] = validate(ident.models, point, meas, tick=lambda: bar.update(1))
-            if ident.joint is not None:
-                mark_predictive(validation[par], ident)
-    t_val = time.perf_counter() - t
-    t = time.perf_counter()
-    if settings.leave_one_out:
-        echo("leave one formulation out: each held out, the rest calibrated, the held-out "
-             "one predicted")
-        n_lofo = sum(len(i.models) for i in idents.values())
-        with _bar(n_lofo, "leave-one-out", progress, unit="formulation") as bar:
-            for par, ident in idents.items():
-                if ident.joint is not None:
-                    lofo[par] = ident.leave_one_out(seed=settings.seed)
-                    bar.update(len(ident.models))
-                    continue
-                lofo[par] = leave_one_out(ident.models, meas, grid_points=settings.grid_points,
-                                          seed=settings.seed, prior=ident.posterior.prior,
-                                          tick=lambda: bar.update(1))
-    t_lofo = time.perf_counter() - t
     t = time.perf_counter()
     extra = _effects(idents, settings, out, engine, progress, echo)
     t_effects = time.perf_counter() - t
@@ -314,8 +361,15 @@ def _reproduce(settings: ReproduceSettings, out: Path, progress: bool,
         data["discrepancy"] = extra[0]
     files.append(write_text(out / "identified.json", json.dumps(data, indent=2) + "\n"))
     wall = time.perf_counter() - t0
-    timing = {"identification (RVEs, reduced bases, calibration, screening)": t_ident,
-              "validation full solves": t_val, "leave-one-formulation-out": t_lofo,
+    from .side_processes import side_by_side_possible
+
+    side = side_by_side_possible(len(outs), distributed=engine.distributed)
+    timing = {("identification, validation full solves and leave-one-formulation-out, "
+               "the parametrisations side by side" if side else
+               "identification, validation full solves and leave-one-formulation-out"):
+              t_ident,
+              **{f"of which {s} (the longest parametrisation's)" if side else
+                 f"of which {s}": max(v) for s, v in stages.items()},
               "discrepancy verdict and effect": t_effects,
               "total (before the report)": wall}
     files.append(write_text(out / "report.md", _reproduce_markdown(
@@ -421,7 +475,8 @@ def run_identify(meas: Measurements, settings: ReproduceSettings, out: Path, *,
     with open_engine(out, workers=workers, scheduler=scheduler, store=store,
                      echo=echo) as engine:
         t0 = time.perf_counter()
-        idents = _identify_all(meas, settings, progress, echo, engine)
+        idents = {p: o["ident"] for p, o in
+                  _identify_all(meas, settings, progress, echo, engine).items()}
         extra = _effects(idents, settings, out, engine, progress, echo)
         drop_fields(engine, keep_fields, echo)
         echo(f"engine: {engine.summary()}")
