@@ -33,8 +33,8 @@ def add_parser(sub) -> None:
                          description="Identify the interface resistances from the shipped "
                          "Table 3 under both parametrisations, validate with full solves and "
                          "leave-one-formulation-out; report.md, identified.json, figures, "
-                         ".vti, full_solves.parquet, manifest.json. About 5 min on 2 cores at "
-                         "the default --fidelity shipped.")
+                         ".vti, full_solves.parquet, manifest.json. About 4 min on 2 cores at "
+                         "the default --fidelity shipped (6 min from a fresh install).")
     rep.add_argument("--out", default="itr-reproduce", help="output folder "
                      "(default itr-reproduce)")
     rep.add_argument("--no-leave-one-out", action="store_true",

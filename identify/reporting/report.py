@@ -539,8 +539,8 @@ def difference_lines(idents: Mapping[str, Identification]) -> list[str]:
 def _convergence(jp) -> str:
     """How a converged joint posterior met its rule (:func:`~..inference.joint.sample`)."""
     if jp.source == "importance":
-        return (f"converged (importance draws from a t fitted to a chain spanning "
-                f"{PROPOSAL_TAUS} or more of its autocorrelation times as estimated on it, worth "
-                f"{jp.effective_draws:.0f} independent draws)")
+        return (f"converged (importance draws from two t fitted to a chain spanning "
+                f"{PROPOSAL_TAUS} or more of its autocorrelation times as estimated on it, "
+                f"worth {jp.effective_draws:.0f} independent draws)")
     return (f"converged (every chain spans {CHAIN_TAUS} autocorrelation times, worth "
             f"{jp.effective_draws:.0f} independent draws)")
