@@ -162,10 +162,17 @@ class Workload:
     solver: str
     workers: int | None = None
     scheduler: str | None = None
+    #: Processes of this machine that share the grids' solves side by side, each holding
+    #: its own caches and fields (1: this process alone).
+    processes: int = 1
 
     def __post_init__(self) -> None:
         if not self.grids:
             raise ValueError("grids: a workload needs at least one grid")
+        if isinstance(self.processes, bool) or not isinstance(self.processes, int) \
+                or self.processes < 1:
+            raise ValueError(f"processes: expected a whole number >= 1, got "
+                             f"{self.processes!r}")
 
     @property
     def largest(self) -> Grid:
@@ -185,7 +192,11 @@ class Workload:
             return worker_memory_limit(task)
         problems = sum(g.held_bytes()[0] for g in grids)
         fields = sum(g.held_bytes()[1] for g in grids)
-        return int(PROCESS_BASE_BYTES + task + min(problems, PROBLEM_CACHE_BYTES) + fields)
+        each = PROCESS_BASE_BYTES + task + min(problems, PROBLEM_CACHE_BYTES) + fields
+        # side by side: every process as large as one alone would be (a bound), and this
+        # one waiting beside them
+        return int(self.processes * each
+                   + (PROCESS_BASE_BYTES if self.processes > 1 else 0))
 
     def _fit(self, g: Grid, budget: float) -> int:
         """The most voxels per edge grid ``g`` may have, its box kept, for a run of it alone
@@ -253,7 +264,8 @@ class Workload:
         avail = available_memory()
         where = (f"each worker of scheduler {self.scheduler}" if self.scheduler else
                  f"{counted(self.workers, 'local worker')}" if self.workers else
-                 "this process")
+                 f"this process and {self.processes} side processes" if self.processes > 1
+                 else "this process")
         mem = f"peak ~{_gb(self.peak_bytes())} in {where}"
         if avail is not None and not self.scheduler:
             mem += f" of {_gb(avail)} available"

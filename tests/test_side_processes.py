@@ -11,11 +11,14 @@ import pytest
 from itr_identify.workflows.side_processes import identify_side_by_side, side_by_side_possible
 
 
-def _job(par: str, *, echo, value: int) -> dict:
-    """A side process's job: a line, its environment's numba threads, its process id."""
+def _job(par: str, *, echo, value: int, together=None) -> dict:
+    """A side process's job: a line, its environment's numba threads, its process id;
+    ``together``: a barrier both jobs must reach (they run at the same time)."""
     echo(f"{par}: working on {value}")
     if value < 0:
         raise ValueError(f"value: expected >= 0, got {value}")
+    if together is not None:
+        together.wait(timeout=120)
     return {"threads": os.environ.get("NUMBA_NUM_THREADS"), "pid": os.getpid(),
             "value": 2 * value}
 
@@ -23,7 +26,11 @@ def _job(par: str, *, echo, value: int) -> dict:
 def test_each_parametrisation_runs_in_a_process_of_its_own_on_one_thread():
     before = os.environ.get("NUMBA_NUM_THREADS")
     lines: list[str] = []
-    out = identify_side_by_side(_job, ["area", "gap"], echo=lines.append, value=3)
+    import multiprocessing
+
+    with multiprocessing.get_context("spawn").Manager() as manager:
+        out = identify_side_by_side(_job, ["area", "gap"], echo=lines.append, value=3,
+                                    together=manager.Barrier(2))
     assert list(out) == ["area", "gap"]
     assert [o["value"] for o in out.values()] == [6, 6]
     assert {o["threads"] for o in out.values()} == {"1"}

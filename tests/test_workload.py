@@ -152,3 +152,27 @@ def test_time_grows_with_solves_voxels_and_particles():
     b = Grid("b", 12.0, 0.125, rves=3, solves=10, particles=70)
     assert Workload((b,), "fft").seconds() > Workload((a,), "fft").seconds()
     assert Workload((a,), "fv").seconds() > Workload((a,), "fft").seconds()
+
+
+def test_side_by_side_processes_each_count_in_the_peak_and_the_plan_says_so():
+    """Identifications side by side hold their own caches and fields: the peak is each
+    process's as if alone, plus this process's base; the plan names the processes; a
+    bad count is refused naming the argument."""
+    from itr_identify.forward.model import ForwardSettings
+    from itr_identify.forward.workload import identification_workload
+    from itr_surrogate.workload import PROCESS_BASE_BYTES, Workload
+
+    g = Grid("g", 12.0, 0.25, rves=10, solves=20, fields=True, kept_fields=4)
+    alone = Workload((g,), "fft")
+    two = Workload((g,), "fft", processes=2)
+    assert two.peak_bytes() == 2 * alone.peak_bytes() + PROCESS_BASE_BYTES
+    assert "in this process and 2 side processes" in two.summary()
+    with pytest.raises(ValueError, match="processes: expected a whole number >= 1"):
+        Workload((g,), "fft", processes=0)
+    comps = {"Al2O3-60": {"Al2O3": 0.6}, "AlN-60": {"AlN": 0.6}}
+    both = identification_workload(ForwardSettings(), comps, ["area", "gap"], validation=True)
+    one = identification_workload(ForwardSettings(), comps, ["gap"], validation=True)
+    workers = identification_workload(ForwardSettings(), comps, ["area", "gap"],
+                                      validation=True, workers=2)
+    assert one.processes == 1 and workers.processes == 1
+    assert both.processes == (2 if (os.cpu_count() or 1) > 1 else 1)

@@ -13,6 +13,7 @@ and solves them at both voxels, once per correction round (counted at two rounds
 
 from __future__ import annotations
 
+import os
 from collections.abc import Mapping, Sequence
 from dataclasses import replace
 
@@ -20,7 +21,8 @@ from itr_surrogate.workload import Grid, Workload, expected_particles
 
 from .model import PARAMETRISATIONS, ForwardSettings, filler_specs, shipped_factor
 
-__all__ = ["identification_workload", "tables_workload", "TYPICAL_BASIS_SOLVES",
+__all__ = ["identification_workload", "side_by_side_possible", "tables_workload",
+           "TYPICAL_BASIS_SOLVES",
            "TYPICAL_ROUNDS"]
 
 #: Full solves of a reduced basis at the default settings (measured 5 under the gap and 8
@@ -62,6 +64,14 @@ def _faithful_grids(settings: ForwardSettings, compositions: Mapping[str, Mappin
             for (box, voxel), (count, particles) in sorted(grids.items())]
 
 
+def side_by_side_possible(parametrisations: int, *, distributed: bool) -> bool:
+    """Whether ``parametrisations`` identifications run side by side, one process each
+    (:mod:`itr_identify.workflows.side_processes`): more than one, more than one core, and
+    solves in this machine's processes (a distributed engine already spreads the solves;
+    its client stays in this process)."""
+    return parametrisations > 1 and not distributed and (os.cpu_count() or 1) > 1
+
+
 def identification_workload(settings: ForwardSettings,
                             compositions: Mapping[str, Mapping[str, float]],
                             parametrisations: Sequence[str], *, validation: bool,
@@ -78,7 +88,10 @@ def identification_workload(settings: ForwardSettings,
         fa = settings.faithful
         rounds = 0 if fa is None else fa.packings * min(TYPICAL_ROUNDS, fa.max_rounds)
         grids += _faithful_grids(settings, compositions, solves_per_voxel=rounds)
-    return Workload(tuple(grids), settings.solver, workers, scheduler)
+    side = side_by_side_possible(len(parametrisations),
+                                 distributed=bool(workers or scheduler))
+    return Workload(tuple(grids), settings.solver, workers, scheduler,
+                    processes=len(parametrisations) if side else 1)
 
 
 def tables_workload(settings, compositions: Mapping[str, Mapping[str, float]], *,

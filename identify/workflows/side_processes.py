@@ -28,17 +28,12 @@ from concurrent.futures import ProcessPoolExecutor
 from contextlib import contextmanager
 from typing import Any
 
+from ..forward.workload import side_by_side_possible
+
 __all__ = ["identify_side_by_side", "side_by_side_possible", "tie_to"]
 
 #: Where a side process's lines go (set in the process by :func:`_start`).
 _LINES = None
-
-
-def side_by_side_possible(parametrisations: int, *, distributed: bool) -> bool:
-    """Whether ``parametrisations`` identifications run side by side: more than one, more
-    than one core, and solves in this machine's processes (a distributed engine already
-    spreads the solves; its client stays in this process)."""
-    return parametrisations > 1 and not distributed and (os.cpu_count() or 1) > 1
 
 
 def _start(lines) -> None:
