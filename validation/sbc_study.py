@@ -56,6 +56,8 @@ TARGET_P = 0.01
 TARGET_BIAS = 0.1
 #: Draws the targets are judged on (acceptance 1 of issue 59).
 STUDY_DRAWS = 200
+#: The report's title.
+TITLE = "Simulation-based calibration of the joint posterior (issue 59)"
 
 
 #: The tabulated forward models, their priors and the replicate noise, kept after the first
@@ -209,7 +211,7 @@ def report() -> dict:
                "converged": sum(r["converged"] for r in rows),
                "seconds_per_draw": float(np.mean([r["seconds"] for r in rows])),
                "parameters": {}}
-    lines = ["# Simulation-based calibration of the joint posterior (issue 59)", "",
+    lines = [f"# {TITLE}", "",
              " ".join(__doc__.split("\n\n")[1].split()), "",
              f"{len(rows)} draws ({summary['converged']} converged by the sampler's rule; "
              f"{summary['seconds_per_draw']:.0f} s of sampling per draw on 2 cores)"
@@ -239,13 +241,35 @@ def report() -> dict:
     return summary
 
 
+def _name_study(name: str) -> None:
+    """Point the study's folders and report at ``name`` (module notes), its likelihood the
+    first study's cached one (the model is the same; only the sampler is under test)."""
+    import shutil
+
+    global RUNS, OUT, OUT_JSON, CACHE, TITLE
+    first = CACHE
+    RUNS = RESULTS / f"sbc_runs_{name}"
+    OUT, OUT_JSON = RESULTS / f"sbc_{name}.md", RESULTS / f"sbc_{name}.json"
+    CACHE = RUNS / "likelihood.npz"
+    TITLE = f"{TITLE}, study {name}"
+    if first.exists() and not CACHE.exists():
+        RUNS.mkdir(parents=True, exist_ok=True)
+        shutil.copyfile(first, CACHE)
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--draws", type=int, default=200)
     ap.add_argument("--report-only", action="store_true")
     ap.add_argument("--shard", default="0/1",
                     help="K/N: only the draws i with i %% N == K (one process per core)")
+    ap.add_argument("--name", default="",
+                    help="a study of its own beside the first: its draws in sbc_runs_NAME/, "
+                         "its report sbc_NAME.md (the tables of the first study's cache); "
+                         "e.g. issue61 for the sampler that stops at its importance draws")
     args = ap.parse_args()
+    if args.name:
+        _name_study(args.name)
     k, n = (int(x) for x in args.shard.split("/"))
     if not args.report_only:
         RUNS.mkdir(parents=True, exist_ok=True)
