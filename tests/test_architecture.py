@@ -56,6 +56,23 @@ def test_itr_fft_never_uses_the_fv_solver():
         assert "itr_fv.homogenize" not in f.read_text(encoding="utf-8"), f
 
 
+@pytest.mark.parametrize("package", LAYERS)
+def test_compiled_kernels_cache_outside_the_installed_package(package):
+    """Every CPU kernel compiles through :func:`itr_fv.numba_cache.njit`: numba's own
+    ``cache=True`` writes into the package's ``__pycache__``, which ``pip uninstall`` leaves
+    behind as a folder without ``__init__.py`` that shadows an editable install (CI broke on
+    ``itr_identify.inference`` that way)."""
+    for f in sorted((ROOT / PACKAGES[package]).rglob("*.py")):
+        if f.name == "numba_cache.py":
+            continue
+        tree = ast.parse(f.read_text(encoding="utf-8"))
+        for node in ast.walk(tree):
+            if isinstance(node, ast.keyword) and node.arg == "cache":
+                assert not (isinstance(node.value, ast.Constant) and node.value.value), (
+                    f"{f.relative_to(ROOT)}:{node.value.lineno} compiles with numba's own "
+                    "cache=True; use itr_fv.numba_cache.njit")
+
+
 # ------------------------------------------------------------------------ import circles
 def package_modules(package: str) -> dict[str, Path]:
     """Dotted module name -> file, for every module of ``package`` (``__init__.py`` is the
