@@ -498,3 +498,57 @@ def minus_operator_group_sums(g, x, r, out, groups, n_groups):  # pragma: no cov
         part[c] = _chunk_minus_sums(g, x, r, out, groups, n_groups, c * n1 // n_chunks,
                                     (c + 1) * n1 // n_chunks)
     return part.sum(axis=0)
+
+
+@njit(inline="always", **_SER)
+def _pull(g_face, cur, scale, theta, qi, qj, qk, best, who):  # pragma: no cover - compiled
+    """(best, who) after looking at neighbour q across a face of conductance ``g_face``."""
+    gq = cur[qi, qj, qk]
+    if gq > 0 and g_face >= theta * scale[gq] and g_face > best:
+        return g_face, gq
+    return best, who
+
+
+@njit(**_SER)
+def group_scales(bulk, groups, n_groups):  # pragma: no cover - compiled
+    """Largest bulk scale (:func:`bulk_scale`) over the cells of every group."""
+    out = np.zeros(n_groups)
+    flat_b = bulk.ravel()
+    flat_g = groups.ravel()
+    for t in range(flat_g.size):
+        if flat_b[t] > out[flat_g[t]]:
+            out[flat_g[t]] = flat_b[t]
+    return out
+
+
+@njit(**_PAR)
+def join_pass(g, cur, scale, theta, nxt):  # pragma: no cover - compiled
+    """One pass of :func:`itr_fft.multigrid.coupled_groups`: every matrix cell (group 0)
+    of ``cur`` takes the group of its neighbour across its strongest face that is at least
+    ``theta`` times that group's scale (``scale[group]``, :func:`group_scales`); returns
+    how many cells changed."""
+    n1, n2, n3 = cur.shape
+    changed = np.zeros(n1, dtype=np.int64)
+    for i in nb.prange(n1):
+        im = i - 1 if i > 0 else n1 - 1
+        ip = i + 1 if i < n1 - 1 else 0
+        for j in range(n2):
+            jm = j - 1 if j > 0 else n2 - 1
+            jp = j + 1 if j < n2 - 1 else 0
+            for k in range(n3):
+                nxt[i, j, k] = cur[i, j, k]
+                if cur[i, j, k] != 0:
+                    continue
+                km = k - 1 if k > 0 else n3 - 1
+                kp = k + 1 if k < n3 - 1 else 0
+                best, who = 0.0, 0
+                best, who = _pull(g[0, i, j, k], cur, scale, theta, ip, j, k, best, who)
+                best, who = _pull(g[0, im, j, k], cur, scale, theta, im, j, k, best, who)
+                best, who = _pull(g[1, i, j, k], cur, scale, theta, i, jp, k, best, who)
+                best, who = _pull(g[1, i, jm, k], cur, scale, theta, i, jm, k, best, who)
+                best, who = _pull(g[2, i, j, k], cur, scale, theta, i, j, kp, best, who)
+                best, who = _pull(g[2, i, j, km], cur, scale, theta, i, j, km, best, who)
+                if who:
+                    nxt[i, j, k] = who
+                    changed[i] += 1
+    return changed.sum()

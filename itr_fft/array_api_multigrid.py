@@ -45,7 +45,7 @@ from itr_fv.discrete.face_classes import to_host
 from itr_fv.discrete.operator import apply_operator
 
 from .deflation import group_operator
-from .multigrid import AggregationMultigrid
+from .multigrid import AggregationMultigrid, coupled_groups
 
 __all__ = ["ArrayAPIMultigrid", "ArrayAPIDeflation", "ParticleMultigridPreconditioner",
            "face_stencil"]
@@ -379,7 +379,9 @@ class ParticleMultigridPreconditioner:
     g : ndarray, shape (3, n1, n2, n3)
         Face conductances on the host, W/(m^2 K) (``DiscreteSystem.g``).
     particle_ids : int ndarray, shape (n1, n2, n3), optional
-        Particle of every voxel, 0 = matrix (``DiscreteSystem.particle_ids``).
+        Particle of every voxel, 0 = matrix (``DiscreteSystem.particle_ids``); the
+        hierarchy and the deflation follow :func:`itr_fft.multigrid.coupled_groups` of
+        them, as the numba backend's do.
     device : optional
         Device of the arrays.
     dtype : numpy.float32 or numpy.float64
@@ -402,6 +404,7 @@ class ParticleMultigridPreconditioner:
         shared = g_device if g_device is not None and g_device.dtype == mg_dtype else None
         g64 = g_device if g_device is not None and g_device.dtype == xp.float64 else None
         self.xp = xp
+        particle_ids = coupled_groups(g, particle_ids)  # the numba backend's groups
         self.multigrid = ArrayAPIMultigrid(xp, g, particle_ids, device=device, dtype=dtype,
                                            g_device=shared, **options)
         self.deflation = (ArrayAPIDeflation(xp, g, particle_ids, self.multigrid,

@@ -33,12 +33,64 @@ import numpy as np
 
 from . import _mg_kernels as MG
 
-__all__ = ["AggregationMultigrid", "MG_BYTES_PER_VOXEL"]
+__all__ = ["AggregationMultigrid", "MG_BYTES_PER_VOXEL", "coupled_groups"]
 
 #: Extra peak bytes per voxel of a multigrid solve over an FFT-preconditioned one (the
 #: hierarchy, the deflation's vectors; no FFT buffers). Measured: peak RSS 180 vs 148 bytes
 #: per voxel, AlN-60 at 192^3, one load case, fields not kept.
 MG_BYTES_PER_VOXEL = 32
+
+#: Passes of :func:`coupled_groups` at most (a bridge of matrix cells is joined one cell
+#: deeper per pass; the contact necks seen are one or two cells long).
+JOIN_PASSES = 8
+
+
+def coupled_groups(g: np.ndarray, particle_ids: np.ndarray | None, *,
+                   theta: float = 0.5) -> np.ndarray | None:
+    """The groups the multigrid and the particle deflation follow: the particle ids, with
+    every matrix cell that conducts like a particle's bulk joined to that particle.
+
+    Where touching particles meet at a thin film (the stated film, 0 nm by default), the
+    faces of a few matrix cells in the contact neck carry the filler's conductance (their
+    segments run through filler). Grouped with the matrix, such a cell ties a particle to
+    the matrix's aggregates and deflation constant as if by filler, and CG slows: AlN-60 at
+    0.125 um took 82 iterations per load case instead of 46
+    (``validation/results/contact_iterations.md``). A matrix cell takes the group of its
+    neighbour across its strongest face whose conductance is at least ``theta`` times that
+    neighbour's particle's bulk scale (its largest face between two of its cells, W/(m^2
+    K): the filler's own), repeated so that
+    a bridge of several cells is joined (at most :data:`JOIN_PASSES` passes). Only the
+    preconditioner sees these groups: the operator, and so the solution, is unchanged.
+
+    Parameters
+    ----------
+    g : ndarray, shape (3, n1, n2, n3)
+        Face conductances, ``g[d][p]`` between cell ``p`` and ``p + e_d``, W/(m^2 K) (any
+        common scale).
+    particle_ids : int ndarray, shape (n1, n2, n3), or None
+        Particle of every cell, 0 = matrix (``DiscreteSystem.particle_ids``).
+    theta : float
+        Fraction of the particle's bulk scale a face must reach, in (0, 1].
+
+    Returns
+    -------
+    int32 ndarray or None
+        The groups (None where ``particle_ids`` is None).
+    """
+    if particle_ids is None:
+        return None
+    if not 0.0 < theta <= 1.0:
+        raise ValueError(f"theta: expected a fraction in (0, 1], got {theta!r}")
+    g = np.ascontiguousarray(g, dtype=np.float64)
+    cur = np.array(particle_ids, dtype=np.int32, order="C")  # a copy: the passes swap
+    scale = MG.group_scales(MG.bulk_scale(g, cur), cur, int(cur.max()) + 1)
+    nxt = np.empty_like(cur)
+    for _ in range(JOIN_PASSES):
+        if not MG.join_pass(g, cur, scale, float(theta), nxt):
+            break
+        cur, nxt = nxt, cur
+    return cur
+
 
 
 class _Level:

@@ -45,7 +45,7 @@ from itr_fv.solvers.krylov import ArrayOps, block_conjugate_gradients, conjugate
 from . import _kernels as K
 from . import _mg_kernels as MG
 from .deflation import ParticleDeflation
-from .multigrid import MG_BYTES_PER_VOXEL, AggregationMultigrid
+from .multigrid import MG_BYTES_PER_VOXEL, AggregationMultigrid, coupled_groups
 from .spectral import laplacian_symbol, reference_conductance
 
 __all__ = ["NumbaFFTBackend", "reference_conductance", "FLOAT32_MIN_TOL", "float32_min_tol",
@@ -169,7 +169,7 @@ class _MultigridPreconditioner:
 
     def __init__(self, system: DiscreteSystem, labels_flat: np.ndarray | None,
                  counts: np.ndarray | None) -> None:
-        ids = system.particle_ids
+        ids = coupled_groups(system.g, system.particle_ids)
         self.multigrid = AggregationMultigrid(system.g, ids)
         self.deflation = (ParticleDeflation(system.g, ids, self.multigrid)
                           if ids is not None and ids.any() else None)
