@@ -267,6 +267,11 @@ def test_the_open_map_inverts_and_its_jacobian_is_the_derivative():
     d = [(box.space.from_open(y + h * e)[0][:, i] - box.space.from_open(y - h * e)[0][:, i])
          / (2 * h) for i, e in ((0, np.eye(3)[0]), (1, np.eye(3)[1]))]
     np.testing.assert_allclose(log_jac, np.log(d[0]) + np.log(d[1]), rtol=0, atol=1e-6)
+    np.testing.assert_array_equal(box.space.log_jacobian(y), log_jac)
+    assert box.space.inside(theta).all()
+    outside = theta.copy()
+    outside[0, 0] = box.space.a[0]            # on the end of its uniform prior: not inside
+    assert not box.space.inside(outside)[0] and box.space.inside(outside)[1:].all()
 
 
 def test_importance_draws_give_the_exact_evidence_and_quantiles():

@@ -363,9 +363,24 @@ class JointSpace:
         theta = np.array(y, dtype=float, copy=True)
         s = special.expit(y[:, uni])
         theta[:, uni] = lo + width * s
+        return theta, self._log_jacobian(s, width)
+
+    def log_jacobian(self, y: np.ndarray) -> np.ndarray:
+        """``ln |d theta / d y|`` (N,) of :meth:`from_open` at the open points ``y`` (N, D),
+        without the points themselves."""
+        uni, _, width = self._open_arrays
+        return self._log_jacobian(special.expit(y[:, uni]), width)
+
+    @staticmethod
+    def _log_jacobian(s: np.ndarray, width: np.ndarray) -> np.ndarray:
         with np.errstate(divide="ignore"):
-            log_jac = np.sum(np.log(width) + np.log(s) + np.log1p(-s), axis=1)
-        return theta, log_jac
+            return np.sum(np.log(width) + np.log(s) + np.log1p(-s), axis=1)
+
+    def inside(self, theta: np.ndarray) -> np.ndarray:
+        """Whether each point (N, D) lies strictly inside every uniform prior's interval
+        (where :meth:`to_open` is defined), (N,) bool."""
+        uni, lo, width = self._open_arrays
+        return np.all((theta[:, uni] > lo) & (theta[:, uni] < lo + width), axis=1)
 
     @cached_property
     def _open_arrays(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -969,11 +984,10 @@ def _importance(likelihood: JointLikelihood, parts: list[tuple[np.ndarray, np.nd
     u = rng.chisquare(REFINE_DF, draws) / REFINE_DF
     x = np.vstack([mu_x + (z[:half] @ l_x.T) / np.sqrt(u[:half])[:, None],
                    space.from_open(mu_y + (z[half:] @ l_y.T) / np.sqrt(u[half:])[:, None])[0]])
-    uni, lo, width = space._open_arrays
-    inside = np.all((x[:, uni] > lo) & (x[:, uni] < lo + width), axis=1)
+    inside = space.inside(x)
     y = space.to_open(x)
     with np.errstate(divide="ignore", invalid="ignore"):
-        open_part = np.where(inside, _t_logpdf(y, mu_y, l_y) - space.from_open(y)[1], -np.inf)
+        open_part = np.where(inside, _t_logpdf(y, mu_y, l_y) - space.log_jacobian(y), -np.inf)
         logq = np.logaddexp(_t_logpdf(x, mu_x, l_x), open_part) - math.log(2)
     logp = np.concatenate(list(map_chunks(likelihood.log_posterior, x, chunk=20000)))
     with np.errstate(invalid="ignore"):
