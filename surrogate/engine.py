@@ -264,7 +264,8 @@ def run_request(request: SolveRequest, threads: int | None = None) -> SolveResul
     from itr_fv.solvers.driver import homogenize
 
     problem, built = cached_problem(request.rve, request.contact)
-    backend = solver_backend(request.solver, threads=threads)
+    backend = solver_backend(request.solver, threads=threads,
+                             voxels=math.prod(problem.shape))
     t = time.perf_counter()
     with warnings.catch_warnings():
         # the per-area model is tied to its voxel on purpose; its reports say so

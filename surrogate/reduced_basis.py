@@ -313,7 +313,7 @@ class ReducedBasis:
         from itr_fv.solvers.driver import homogenize
 
         def solve(problem, mat):
-            backend = solver_backend(self.solver)
+            backend = solver_backend(self.solver, voxels=math.prod(problem.shape))
             return homogenize(problem, mat, backend=backend, tol=self.solver_tol)
         return solve
 

@@ -28,7 +28,12 @@ from itr_fv.io import counted
 from itr_fv.rve import FillerSpec
 from itr_fv.rve.generate import size_cut
 from itr_fv.rve.spec import RVESpec
-from itr_fv.solvers.choice import other_device_solver, solver_choice
+from itr_fv.solvers.choice import (
+    grid_solver,
+    load_case_seconds,
+    other_device_solver,
+    solver_choice,
+)
 from itr_fv.solvers.resources import HEADROOM, available_memory, estimate_peak_memory
 
 from .engine import PROBLEM_BYTES_PER_VOXEL, PROBLEM_CACHE_BYTES, worker_memory_limit
@@ -124,10 +129,13 @@ class Grid:
                 3 * 8 * self.voxels * self.kept_fields)
 
     def seconds(self, solver: str) -> float:
-        """Serial wall time of its packings and solves, s (an order of magnitude)."""
-        per_voxel = solver_choice(solver).seconds_per_voxel
+        """Serial wall time of its packings and solves, s (an order of magnitude): each
+        solve three load cases of the cost model (:func:`~itr_fv.solvers.choice.
+        load_case_seconds`) of the solver this grid goes to (:func:`~itr_fv.solvers.choice.
+        grid_solver`: a GPU's small grids to the CPU), as the solves themselves choose."""
+        entry = solver_choice(grid_solver(solver, self.voxels))
         return (self.rves * self.particles * PACK_SECONDS_PER_PARTICLE
-                + self.solves * (SOLVE_OVERHEAD_S + 3 * self.voxels * per_voxel))
+                + self.solves * (SOLVE_OVERHEAD_S + 3 * load_case_seconds(entry, self.voxels)))
 
 
 def _gb(b: float) -> str:
@@ -270,9 +278,14 @@ class Workload:
         if avail is not None and not self.scheduler:
             mem += f" of {_gb(avail)} available"
         cores = os.cpu_count() or 1
+        routed = sorted({g.n for g in self.grids
+                         if grid_solver(self.solver, g.voxels) != self.solver})
+        solver = self.solver + (f", its {', '.join(f'{n}^3' for n in routed)} solves on the "
+                                f"CPU ({grid_solver(self.solver, 1)}: sooner there by the "
+                                "cost model)" if routed else "")
         time = ("time: on the scheduler's workers" if self.scheduler else
                 f"about {_duration(self.seconds())} on {counted(cores, 'core')} (solver "
-                f"{self.solver}; an order of magnitude)")
+                f"{solver}; an order of magnitude)")
         return "plan: " + "; ".join(parts) + f"; {mem}; {time}"
 
     def alternatives(self) -> str:

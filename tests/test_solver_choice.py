@@ -221,3 +221,40 @@ def test_a_gpu_solve_runs_only_on_the_worker_that_declares_a_gpu(monkeypatch):
         cpu = SolveEngine(echo=lambda s: None).solve_one(
             SolveRequest.for_materials(rve, m, 1e-10))
         assert np.allclose(res.k_diagonal, cpu.k_diagonal, rtol=1e-8)
+
+
+def test_small_grids_of_a_gpu_choice_go_to_the_cpu_by_the_cost_model(gpus):
+    """The GPU pays a fixed cost per load case (launches, a host sync per iteration): by
+    the cost model a 48^3 grid (itr reproduce's) goes to the CPU's default solver on 2 and
+    on 16 cores, a 256^3 grid stays on the GPU, and the crossover moves to larger grids
+    with more CPU cores; CPU choices are never moved."""
+    from itr_fv.solvers.choice import CPU_THREAD_EXPONENT, grid_solver, load_case_seconds
+
+    assert grid_solver("gpu", 48 ** 3, threads=2) == grid_solver("gpu", 48 ** 3,
+                                                                 threads=16) == "fft"
+    assert grid_solver("gpu", 256 ** 3, threads=16) == "gpu"
+    assert all(grid_solver(c, 8, threads=64) == c for c in ("fft", "mg", "fv"))
+
+    def crossover(threads):
+        return next(n for n in range(16, 513, 8) if grid_solver("gpu", n ** 3,
+                                                                threads=threads) == "gpu")
+    assert 56 <= crossover(2) < crossover(16) <= 160
+    fft = SOLVERS["fft"]
+    ratio = load_case_seconds(fft, 10 ** 6, 2) / load_case_seconds(fft, 10 ** 6, 16)
+    assert ratio == pytest.approx(8 ** CPU_THREAD_EXPONENT)
+    assert load_case_seconds(fft, 10 ** 6) == pytest.approx(10 ** 6 * fft.seconds_per_voxel)
+    # the backend object follows: a small grid of the gpu choice gets the CPU's backend
+    gpus(1)
+    assert solver_backend("gpu", voxels=48 ** 3).name == "itr_fft"
+
+
+def test_the_plan_of_a_gpu_run_on_small_grids_is_the_cpus_and_says_so():
+    from itr_surrogate.workload import Grid, Workload
+
+    small = (Grid("paper", 12.0, 0.25, rves=3, solves=40, particles=200),)
+    on_gpu, on_cpu = Workload(small, "gpu"), Workload(small, "fft")
+    assert on_gpu.seconds() == on_cpu.seconds()
+    assert "its 48^3 solves on the CPU (fft" in on_gpu.summary()
+    large = (Grid("faithful", 64.0, 0.125, rves=1, solves=3, particles=1500),)
+    assert Workload(large, "gpu").seconds() < Workload(large, "fft").seconds() / 5
+    assert "on the CPU" not in Workload(large, "gpu").summary()

@@ -11,7 +11,9 @@ that would not fit is skipped and said so):
 
 1. the stack: Python, NumPy, numba, numba-cuda, CuPy, the driver, the device and its copy
    bandwidth; whether the fused kernels run, else why not;
-2. ``al2o3_60`` of the common RVE set at 512^3 (gap model), three load cases, tol 1e-8, the
+2. the small grids (``al2o3_60`` at 48^3 and 96^3) on the device and on the CPU's default
+   solver, each against the cost model that sends small grids to the CPU
+   (:func:`itr_fv.solvers.choice.grid_solver`); then ``al2o3_60`` of the common RVE set at 512^3 (gap model), three load cases, tol 1e-8, the
    array-API backend as ``auto`` takes it (``kernels="auto"``) and with the portable
    kernels: CG (sum of the load cases' solve times), wall, iterations, ms per iteration;
 3. AlN-60 in a 64 um box at 0.125 um (512^3, Table 1's AlN, R = 3e-8 m^2 K/W, gap model):
@@ -134,6 +136,16 @@ def fused_state(on_gpu: bool) -> str:
     return "run" if why is None else f"do not run: {why}"
 
 
+def model_s(n: int, device: str) -> float:
+    """The cost model's wall of three load cases at n^3 on ``device``
+    (:func:`itr_fv.solvers.choice.load_case_seconds`): what the plans and the routing of
+    small grids read, checked here against the measured rows."""
+    from itr_fv.solvers.choice import SOLVERS, load_case_seconds
+
+    entry = SOLVERS["gpu" if device == "cuda" else "fft"]
+    return 3 * load_case_seconds(entry, n ** 3, None if device == "cuda" else os.cpu_count())
+
+
 def solver_rows(rep: Report, n: int, device: str, budget: Budget) -> tuple | None:
     """Rows 2 and 3: al2o3_60 and AlN-60 at n^3, auto kernels and portable ones; returns
     the AlN problem and its materials (None where it was skipped)."""
@@ -143,6 +155,7 @@ def solver_rows(rep: Report, n: int, device: str, budget: Budget) -> tuple | Non
     warm = DiscreteProblem.for_materials(ms, mat)
     for opts in (auto, portable):  # kernels compiled, FFT plans made
         solve(warm, mat, opts)
+    on_device_small(rep, device, budget)
     if budget.allows(60, f"al2o3_60 {n}^3", rep.log):
         ms, mat = build("al2o3_60", n, contact="gap")
         problem = DiscreteProblem.for_materials(ms, mat)
@@ -155,7 +168,8 @@ def solver_rows(rep: Report, n: int, device: str, budget: Budget) -> tuple | Non
             rep.row(f"al2o3_60 {n}^3 CG ({name})", GOALS["al2o3_cg"] if name == "auto"
                     else None, r["cg_s"], detail)
             if name == "auto":
-                rep.row(f"al2o3_60 {n}^3 wall (auto)", GOALS["al2o3_wall"], r["wall_s"])
+                rep.row(f"al2o3_60 {n}^3 wall (auto)", GOALS["al2o3_wall"], r["wall_s"],
+                        f"the cost model: {model_s(n, device):.2f} s")
         del problem, ms
     if budget.allows(90, f"AlN-60 {n}^3", rep.log):
         problem, mat, build_s = aln_problem(n)
@@ -171,6 +185,37 @@ def solver_rows(rep: Report, n: int, device: str, budget: Budget) -> tuple | Non
                     f"{'/'.join(map(str, r['iterations']))}, k_xx {r['k_eff'][0][0]:.6g}")
         return problem, mat
     return None
+
+
+def on_device_small(rep: Report, device: str, budget: Budget) -> bool:
+    """Rows of the small grids the cost model sends to the CPU: al2o3_60 at 48^3 and 96^3
+    on the device and on the CPU's default solver, each against the model."""
+    from itr_fv.solvers.choice import grid_solver
+
+    if not budget.allows(30, "small grids: device against CPU", rep.log):
+        return False
+    for n in (48, 96):
+        ms, mat = build("al2o3_60", n, contact="gap")
+        problem = DiscreteProblem.for_materials(ms, mat)
+        dev = solve(problem, mat, {"device": device, "kernels": "auto",
+                                   "preconditioner": "fft"})
+        t = time.perf_counter()
+        res = homogenize_cpu(problem, mat)
+        cpu = time.perf_counter() - t
+        rep.row(f"al2o3_60 {n}^3 on {device} / on the CPU", None, dev["wall_s"],
+                f"CPU {cpu:.2f} s ({res.info.get('workers')} threads); the cost model "
+                f"{model_s(n, device):.2f} / {model_s(n, 'cpu'):.2f} s, routes it to "
+                f"{grid_solver('gpu', n ** 3)}")
+    return True
+
+
+def homogenize_cpu(problem, mat):
+    """The CPU's default solve (``fft``) of ``problem``."""
+    from itr_fv.solvers.choice import solver_backend
+    from itr_fv.solvers.driver import homogenize
+
+    return homogenize(problem, mat, backend=solver_backend("fft"), tol=1e-8,
+                      store_fields=False, check_memory=False)
 
 
 def command_row(rep: Report, label: str, args: list[str], goal_s: float,

@@ -20,6 +20,7 @@ Defaults come from the package's own studies, not from convenience:
 from __future__ import annotations
 
 import json
+import math
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -198,8 +199,8 @@ def run_demo(settings: DemoSettings, out: Path, echo=print) -> list[Path]:
          f"({r_source})")
     mat = Materials(system.conductivities([filler]), {(filler, matrix): r}, matrix=matrix,
                     contact="gap")
-    res = homogenize(ms, mat, backend=solver_backend(settings.solver),
-                     tol=settings.tol)
+    backend = solver_backend(settings.solver, voxels=math.prod(ms.shape))
+    res = homogenize(ms, mat, backend=backend, tol=settings.tol)
     echo(res.summary())
     k_iso = float(np.trace(res.k_eff) / 3.0)
     echo(f"k_iso = {k_iso:.4f} W/(m K), solver {res.solver}")

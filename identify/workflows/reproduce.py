@@ -181,7 +181,8 @@ def _temperature_field(ident: Identification, formulation: str, out: Path) -> li
     problem = cached_problem(RVEData.of(m.microstructures[0]), mat.contact)[0]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        res = homogenize(problem, mat, backend=solver_backend(ident.settings.solver),
+        backend = solver_backend(ident.settings.solver, voxels=math.prod(problem.shape))
+        res = homogenize(problem, mat, backend=backend,
                          tol=ident.settings.solver_tol)
     level = m.level_at(best)
     name = fidelity_name(ident.settings.faithful)

@@ -26,6 +26,7 @@ name, which is what travels in campaign files, solve requests and the solve stor
 
 from __future__ import annotations
 
+import os
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
@@ -36,7 +37,8 @@ from .devices import cuda_device_count, require_cuda
 
 __all__ = ["SolverChoice", "SOLVERS", "DEFAULT_SOLVER", "DEFAULT_DEVICE", "DEVICES",
            "default_solver", "other_device_solver", "check_solver", "resolve_solver",
-           "solver_choice", "solver_backend", "solvers_for", "worker_resources", "needs_gpu"]
+           "solver_choice", "solver_backend", "solvers_for", "worker_resources", "needs_gpu",
+           "load_case_seconds", "grid_solver", "CPU_REFERENCE_THREADS", "CPU_THREAD_EXPONENT"]
 
 #: Where a solve may run.
 DEVICES = ("cpu", "cuda", "auto")
@@ -65,7 +67,14 @@ class SolverChoice:
         One line for help texts.
     seconds_per_voxel : float
         Measured wall time of one load case per voxel at tol 1e-8, s (dense 60 % Al2O3,
-        about 80 CG iterations; the time estimate of :mod:`itr_surrogate.workload`).
+        about 80 CG iterations; the time estimate of :mod:`itr_surrogate.workload`); a CPU
+        choice's on :data:`CPU_REFERENCE_THREADS` threads.
+    seconds_per_solve : float
+        Fixed wall time of one load case whatever its grid, s: on a GPU the kernel launches
+        and a host sync per CG iteration and the transfers, which small grids cannot hide.
+    small_to_cpu : bool
+        Whether a grid this choice solves slower than the CPU's default solver, by the cost
+        model (:func:`load_case_seconds`), goes to the CPU (:func:`grid_solver`).
     """
 
     name: str
@@ -74,6 +83,8 @@ class SolverChoice:
     device: str = "cpu"
     summary: str = ""
     seconds_per_voxel: float = 6e-6
+    seconds_per_solve: float = 0.0
+    small_to_cpu: bool = False
 
     @property
     def resources(self) -> dict[str, int] | None:
@@ -86,11 +97,21 @@ def _registry(*choices: SolverChoice) -> Mapping[str, SolverChoice]:
     return MappingProxyType({c.name: c for c in choices})
 
 
+#: Threads the CPU choices' seconds per voxel were measured on, and the exponent of their
+#: scaling with threads, ``(CPU_REFERENCE_THREADS / threads) ** CPU_THREAD_EXPONENT``: one
+#: FFT-preconditioned load case at 128^3 took 1.5e-6 s per voxel on 2 cores and 3.3e-7 s on
+#: the 16 cores of an H200's host (../shared/gpu/README.md: 0.58 s at 68 iterations, taken
+#: to 80), 4.5x for 8x the threads.
+CPU_REFERENCE_THREADS = 2
+CPU_THREAD_EXPONENT = 0.72
+
 #: The registered short names. Seconds per voxel and load case: fft and fv from
 #: validation/results/bench_solvers.md (2-core CPU: 256^3 in 65.9 s, 128^3 in 36.8 s, three
-#: load cases), mg from the AlN-60 solves of validation/results/bench_gpu.md, gpu from an
-#: H200 (validation/results/gpu_issue39.md: 160^3 in 0.97 s); an unnamed backend is taken
-#: at fv's.
+#: load cases), mg from the AlN-60 solves of validation/results/bench_gpu.md; gpu on an H200
+#: with the portable kernels (../shared/gpu/README.md, 2026-11-28: al2o3_60 512^3 in 12.7 s
+#: for three load cases, 3.2e-8 s per voxel and load case; ``itr reproduce --device cuda``
+#: 1.6-2.6 s per full solve of three load cases at 48^3, 0.5 s per load case whatever the
+#: grid); an unnamed backend is taken at fv's.
 SOLVERS = _registry(
     SolverChoice("fft", "itr_fft", {}, "cpu", "numba FFT-preconditioned CG (the default)",
                  1.5e-6),
@@ -98,8 +119,40 @@ SOLVERS = _registry(
                  "numba CG with the particle-deflated multigrid (high contrast)", 3e-6),
     SolverChoice("fv", "itr_fv", {}, "cpu", "sparse assembly + pyamg (the reference)", 6e-6),
     SolverChoice("gpu", "array_api", {"device": "cuda"}, "cuda",
-                 "array-API FFT-preconditioned CG on a CUDA device (CuPy)", 8e-8),
+                 "array-API FFT-preconditioned CG on a CUDA device (CuPy)", 3.2e-8,
+                 seconds_per_solve=0.5, small_to_cpu=True),
 )
+
+
+def load_case_seconds(entry: SolverChoice, voxels: int, threads: int | None = None) -> float:
+    """The cost model: wall time of one load case of ``entry`` on ``voxels`` voxels, s.
+
+    ``seconds_per_solve + voxels * seconds_per_voxel``, a CPU choice's per-voxel time scaled
+    to ``threads`` (None: :data:`CPU_REFERENCE_THREADS`, the figure as measured) by
+    :data:`CPU_THREAD_EXPONENT`. An order of magnitude: the plans' estimates and
+    :func:`grid_solver`'s choice read it.
+    """
+    per_voxel = entry.seconds_per_voxel
+    if entry.device == "cpu" and threads is not None:
+        per_voxel *= (CPU_REFERENCE_THREADS / max(int(threads), 1)) ** CPU_THREAD_EXPONENT
+    return entry.seconds_per_solve + voxels * per_voxel
+
+
+def grid_solver(choice: str | None, voxels: int, *, threads: int | None = None) -> str:
+    """The solver a grid of ``voxels`` voxels goes to: for a choice that sends small grids
+    to the CPU (``small_to_cpu``: the GPU's), the CPU's default solver where the cost model
+    (:func:`load_case_seconds`, the CPU on ``threads``, None: this machine's cores) has it
+    sooner, else the choice itself. Measured on an H200 and its 16 host cores, the crossover
+    lies near 120^3 voxels (about 70^3 against 2 cores): ``itr reproduce``'s 48^3 solves
+    took 0.5 s per load case on the GPU against 0.15 s on one CPU thread."""
+    choice = check_solver(choice)
+    entry = solver_choice(choice)
+    if not entry.small_to_cpu:
+        return choice
+    cpu = SOLVERS[DEFAULT_SOLVER]
+    threads = (os.cpu_count() or 1) if threads is None else threads
+    sooner = load_case_seconds(cpu, voxels, threads) < load_case_seconds(entry, voxels)
+    return DEFAULT_SOLVER if sooner else choice
 
 
 def default_solver() -> str:
@@ -199,7 +252,7 @@ def solver_choice(choice: str | None, argument: str = "solver") -> SolverChoice:
     return SOLVERS.get(choice) or SolverChoice(choice, choice)
 
 
-def solver_backend(choice: str, *, threads: int | None = None,
+def solver_backend(choice: str, *, threads: int | None = None, voxels: int | None = None,
                    argument: str = "solver") -> Backend:
     """The backend object of a solver choice.
 
@@ -209,9 +262,15 @@ def solver_backend(choice: str, *, threads: int | None = None,
         A short name, ``"auto"`` or a registered backend name.
     threads : int, optional
         Threads of the numba FFT backend (None: its default for the grid).
+    voxels : int, optional
+        The grid's voxels, where the caller knows them: a choice that sends small grids to
+        the CPU then gets the CPU's backend for a grid the CPU solves sooner
+        (:func:`grid_solver`).
     argument : str
         The name an error gives the argument.
     """
+    if voxels is not None:
+        choice = grid_solver(check_solver(choice, argument), voxels, threads=threads)
     entry = solver_choice(choice, argument)
     options = dict(entry.options)
     if entry.backend == "itr_fft" and threads is not None:
