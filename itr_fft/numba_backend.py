@@ -36,7 +36,6 @@ from typing import Any
 
 import numba
 import numpy as np
-import scipy.fft
 
 from itr_fv.discrete.problem import DiscreteSystem
 from itr_fv.solvers.backends import Backend, LoadCaseSolution, PreparedSystem, register_backend
@@ -45,6 +44,7 @@ from itr_fv.solvers.krylov import ArrayOps, block_conjugate_gradients, conjugate
 from . import _kernels as K
 from . import _mg_kernels as MG
 from .deflation import ParticleDeflation
+from .fft_pair import FFTS, fft_pair, fftw_available
 from .multigrid import MG_BYTES_PER_VOXEL, AggregationMultigrid, coupled_groups
 from .spectral import laplacian_symbol, reference_conductance
 
@@ -138,9 +138,10 @@ class _Preconditioner:
 
     def __init__(self, shape: tuple[int, int, int], g_ref: float, workers: int,
                  labels_flat: np.ndarray | None, counts: np.ndarray | None,
-                 fft_dtype: np.dtype) -> None:
+                 fft_dtype: np.dtype, fft: str = "scipy") -> None:
         self.shape = shape
         self.fft_dtype = fft_dtype
+        self.pair = fft_pair(fft, shape, fft_dtype, workers)
         self.s = [laplacian_symbol(n) for n in shape]
         self.inv_gref = 1.0 / g_ref
         self.workers = workers
@@ -150,11 +151,11 @@ class _Preconditioner:
     def apply_dot(self, r: np.ndarray) -> tuple[np.ndarray, float]:
         """z and r . z (the latter from the spectrum, fused with the division)."""
         r_in = r if r.dtype == self.fft_dtype else r.astype(self.fft_dtype)
-        rhat = scipy.fft.rfftn(r_in, workers=self.workers)
+        rhat = self.pair.forward(r_in)
         del r_in
         rz = K.spectral_solve(rhat, self.s[0], self.s[1], self.s[2], self.shape[2],
                               self.inv_gref)
-        z = scipy.fft.irfftn(rhat, s=self.shape, workers=self.workers, overwrite_x=True)
+        z = self.pair.inverse(rhat)
         del rhat
         if self.labels_flat is not None:
             K.project_clusters(z, self.labels_flat, self.counts)
@@ -276,9 +277,10 @@ class _PreparedFFT(PreparedSystem):
                                                            self.counts)
         else:
             self.preconditioner = _Preconditioner(shape, g_ref, self.workers,
-                                                  self.labels_flat, self.counts, fdt)
+                                                  self.labels_flat, self.counts, fdt,
+                                                  backend.fft)
         self.info = {"g_ref": g_ref, "k_ref": g_ref * voxel_m, "dtype": self.dtype.name,
-                     "fft_dtype": fdt.name, "workers": self.workers,
+                     "fft_dtype": fdt.name, "fft": backend.fft, "workers": self.workers,
                      "preconditioner": kind, "precision": backend.precision,
                      "block": self.block}
         if kind == "multigrid":
@@ -379,6 +381,12 @@ class NumbaFFTBackend(Backend):
         residual as in ``"double"``; needs ``dtype=np.float64`` and ``tol >=``
         :data:`MIXED_MIN_TOL`. Measured against ``"double"`` in
         ``validation/results/bench_limit.md``.
+    fft : {"scipy", "fftw"}
+        The FFT preconditioner's FFT pair (:mod:`itr_fft.fft_pair`): SciPy's (default) or
+        FFTW's through pyFFTW, the optional extra ``pip install 'itr-composites[fft]'``
+        (FFTW is GPL-2.0-or-later; measured against SciPy's in
+        ``validation/results/bench_default_solve.md``). The same iterations; the tensor
+        within round-off of SciPy's.
     block : bool
         Solve the load cases of one call together: one CG per load case in lockstep, each
         conductance read once per iteration for all of them (the same iterates as one at a
@@ -394,7 +402,7 @@ class NumbaFFTBackend(Backend):
     def __init__(self, dtype: Any = np.float64, workers: int | None = None,
                  reference: str | float = "geometric", fft_dtype: Any = np.float32,
                  preconditioner: str = "auto", precision: str = "double",
-                 block: bool = False) -> None:
+                 block: bool = False, fft: str = "scipy") -> None:
         if preconditioner not in PRECONDITIONERS:
             raise ValueError(f"preconditioner: expected one of {PRECONDITIONERS}, got "
                              f"{preconditioner!r}")
@@ -410,6 +418,12 @@ class NumbaFFTBackend(Backend):
             raise ValueError(f"block: expected True or False, got {block!r}")
         self.block = bool(block)
         self.fft_dtype = float_dtype(fft_dtype, "fft_dtype")
+        if fft not in FFTS:
+            raise ValueError(f"fft: expected one of {FFTS}, got {fft!r}")
+        if fft == "fftw" and not fftw_available():
+            raise ValueError("fft: 'fftw' needs pyFFTW (pip install 'itr-composites[fft]'); "
+                             "use fft='scipy'")
+        self.fft = fft
         if workers is not None and (isinstance(workers, bool) or
                                     not isinstance(workers, (int, np.integer)) or workers < 1):
             raise ValueError(f"workers: expected a positive integer, got {workers!r}")
@@ -438,6 +452,8 @@ class NumbaFFTBackend(Backend):
         opts["preconditioner"] = self.preconditioner
         opts["precision"] = self.precision
         opts["block"] = self.block
+        if self.fft != "scipy":  # the store's keys of every SciPy run stay as they were
+            opts["fft"] = self.fft
         return opts
 
     def check(self, shape: tuple[int, int, int], tol: float) -> None:

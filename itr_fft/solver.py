@@ -27,11 +27,11 @@ def homogenize(ms: Microstructure | DiscreteProblem, mat: Materials, tol: float 
                geometry: FaceGeometry | None = None, *, dtype: type = np.float64,
                workers: int | None = None, reference: str | float = "geometric",
                fft_dtype: type = np.float32, check_memory: bool = True,
-               preconditioner: str = "auto") -> HomogenizationResult:
+               preconditioner: str = "auto", fft: str = "scipy") -> HomogenizationResult:
     """Effective conductivity tensor by FFT-preconditioned CG (same system as itr_fv).
 
     The same as :func:`itr_fv.solvers.driver.homogenize` with
-    ``backend=NumbaFFTBackend(dtype, workers, reference, fft_dtype, preconditioner)``; the
+    ``backend=NumbaFFTBackend(dtype, workers, reference, fft_dtype, preconditioner, fft)``; the
     options are those of :class:`~itr_fft.numba_backend.NumbaFFTBackend`.
 
     Parameters
@@ -62,10 +62,11 @@ def homogenize(ms: Microstructure | DiscreteProblem, mat: Materials, tol: float 
         Keep temperature, theta and face fluxes in the result.
     geometry : FaceGeometry, optional
         Precomputed ``face_geometry(ms, staircase)`` to reuse across parameter sets.
-    dtype, workers, reference, fft_dtype, preconditioner
+    dtype, workers, reference, fft_dtype, preconditioner, fft
         Options of :class:`~itr_fft.numba_backend.NumbaFFTBackend` (vector precision,
-        threads, reference conductance of the FFT preconditioner, FFT precision, and the
-        preconditioner: ``"auto"``, ``"fft"`` or ``"multigrid"``).
+        threads, reference conductance of the FFT preconditioner, FFT precision, the
+        preconditioner: ``"auto"``, ``"fft"`` or ``"multigrid"``, and its FFT pair:
+        ``"scipy"`` or ``"fftw"``, the extra ``itr-composites[fft]``).
     check_memory : bool
         Estimate the peak memory first (:mod:`itr_fv.solvers.resources`) and raise
         :class:`~itr_fv.solvers.resources.InsufficientMemoryError` if it exceeds the available
@@ -79,7 +80,7 @@ def homogenize(ms: Microstructure | DiscreteProblem, mat: Materials, tol: float 
         model) and face counts.
     """
     backend = NumbaFFTBackend(dtype=dtype, workers=workers, reference=reference,
-                              fft_dtype=fft_dtype, preconditioner=preconditioner)
+                              fft_dtype=fft_dtype, preconditioner=preconditioner, fft=fft)
     return _drive(ms, mat, backend=backend, tol=tol, maxiter=maxiter, directions=directions,
                   x0=x0, callback=callback, strict=strict, store_fields=store_fields,
                   check_memory=check_memory, staircase=staircase, geometry=geometry)

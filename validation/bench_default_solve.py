@@ -64,8 +64,9 @@ def make_tables(folder: Path, n: int) -> dict[str, Path]:
     return out
 
 
-def child(table: Path, name: str, n: int) -> dict:
-    """In a fresh process of one version: voxelise, warm up, time the default solve."""
+def child(table: Path, name: str, n: int, fft: str | None = None) -> dict:
+    """In a fresh process of one version: voxelise, warm up, time the default solve (with
+    ``fft`` where given: this checkout's optional FFT pair)."""
     import itr_fft
     from itr_fv import Materials, Microstructure
     from itr_fv.materials.paper_data import PAPER_SYSTEM
@@ -81,10 +82,11 @@ def child(table: Path, name: str, n: int) -> dict:
         warnings.simplefilter("ignore")
         small = Microstructure.from_spheres(centers, radii, material, box, 24,
                                             matrix="silicone")
-        itr_fft.homogenize(small, mat, tol=1e-8)
+        extra = {} if fft is None else {"fft": fft}
+        itr_fft.homogenize(small, mat, tol=1e-8, **extra)
         ms = Microstructure.from_spheres(centers, radii, material, box, n, matrix="silicone")
         t = time.perf_counter()
-        res = itr_fft.homogenize(ms, mat, tol=1e-8)
+        res = itr_fft.homogenize(ms, mat, tol=1e-8, **extra)
         wall = time.perf_counter() - t
     return {"wall_s": wall, "iterations": [int(i) for i in res.iterations],
             "k_eff": np.asarray(res.k_eff).tolist(),
@@ -92,10 +94,10 @@ def child(table: Path, name: str, n: int) -> dict:
             "workers": res.info.get("workers")}
 
 
-def run_child(root: Path, table: Path, name: str, n: int) -> dict:
+def run_child(root: Path, table: Path, name: str, n: int, fft: str | None = None) -> dict:
     env = {**os.environ, "PYTHONPATH": str(root)}
     proc = subprocess.run([sys.executable, str(Path(__file__).resolve()), "--child",
-                           str(table), name, str(n)], cwd=root, env=env, capture_output=True,
+                           str(table), name, str(n), *([fft] if fft else [])], cwd=root, env=env, capture_output=True,
                           text=True, check=False, timeout=900)
     if proc.returncode:
         raise RuntimeError(f"{root} {name}: {proc.stderr[-2000:]}")
@@ -132,25 +134,30 @@ def per_operation(table: Path, name: str, n: int, calls: int = 20) -> dict:
             fn()
         out_row[label] = (time.perf_counter() - t) / calls
 
-    for pre in ("fft", "multigrid"):
-        for fft_dtype in ((np.float64, np.float32) if pre == "fft" else (np.float64,)):
-            prepared = NumbaFFTBackend(preconditioner=pre, fft_dtype=fft_dtype).prepare(
-                system, VOXEL_UM * 1e-6)
-            try:
-                if pre == "fft" and fft_dtype == np.float64:
-                    op, ops = prepared.operator, prepared.ops
-                    p, q, rr = x.copy(), np.empty_like(x), r.copy()
-                    timed("operator product and its dot",
-                          lambda op=op: op.apply_dot(x, out))
-                    timed("CG update (x, r and r.r)",
-                          lambda ops=ops: ops.update(p, rr, x, out, 1e-12))
-                    timed("CG direction", lambda ops=ops: ops.direction(q, x, 0.5))
-                    timed("dot", lambda ops=ops: ops.dot(x, r))
-                label = (f"FFT preconditioner ({np.dtype(fft_dtype).name} FFTs)"
-                         if pre == "fft" else "multigrid preconditioner (V-cycle + deflation)")
-                timed(label, lambda pre=prepared.preconditioner: pre.apply_dot(r))
-            finally:
-                prepared.close()
+    from itr_fft.fft_pair import fftw_available
+
+    ways = [("fft", np.float64, "scipy"), ("fft", np.float32, "scipy")]
+    if fftw_available():
+        ways.append(("fft", np.float32, "fftw"))
+    ways.append(("multigrid", np.float64, "scipy"))
+    for pre, fft_dtype, fft in ways:
+        prepared = NumbaFFTBackend(preconditioner=pre, fft_dtype=fft_dtype,
+                                   fft=fft).prepare(system, VOXEL_UM * 1e-6)
+        try:
+            if pre == "fft" and fft_dtype == np.float64:
+                op, ops = prepared.operator, prepared.ops
+                p, q, rr = x.copy(), np.empty_like(x), r.copy()
+                timed("operator product and its dot",
+                      lambda op=op: op.apply_dot(x, out))
+                timed("CG update (x, r and r.r)",
+                      lambda ops=ops: ops.update(p, rr, x, out, 1e-12))
+                timed("CG direction", lambda ops=ops: ops.direction(q, x, 0.5))
+                timed("dot", lambda ops=ops: ops.dot(x, r))
+            label = (f"FFT preconditioner ({np.dtype(fft_dtype).name} FFTs, {fft})"
+                     if pre == "fft" else "multigrid preconditioner (V-cycle + deflation)")
+            timed(label, lambda pre=prepared.preconditioner: pre.apply_dot(r))
+        finally:
+            prepared.close()
     return out_row
 
 
@@ -162,10 +169,11 @@ def markdown(res: dict) -> str:
              "speed-up |", "| --- | --- | --- | --- | --- | --- | --- |"]
     for name, rows in res["solves"].items():
         old = statistics.median(r["wall_s"] for r in rows["old"])
-        for version in ("old", "new"):
+        for version in rows:
             walls = [r["wall_s"] for r in rows[version]]
             med = statistics.median(walls)
-            lines.append(f"| {name} | {res['old'] if version == 'old' else 'this checkout'} | "
+            label = res["old"] if version == "old" else version.replace("new", "this checkout")
+            lines.append(f"| {name} | {label} | "
                          f"{med:.2f} | {', '.join(f'{w:.2f}' for w in walls)} | "
                          f"{'/'.join(map(str, rows[version][0]['iterations']))} | "
                          f"{rows[version][0]['preconditioner']} | {old / med:.2f}x |")
@@ -184,14 +192,17 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--old", default="fe0a979")
     ap.add_argument("--n", type=int, default=N, help="grid edge (default 128)")
-    ap.add_argument("--child", nargs=3, metavar=("TABLE", "RVE", "N"), help=argparse.SUPPRESS)
+    ap.add_argument("--child", nargs="+", help=argparse.SUPPRESS)
     ap.add_argument("--out", type=Path, default=ROOT / "validation" / "results"
                     / "bench_default_solve.md")
     args = ap.parse_args(argv)
     if args.child:
-        print(json.dumps(child(Path(args.child[0]), args.child[1], int(args.child[2]))))
+        print(json.dumps(child(Path(args.child[0]), args.child[1], int(args.child[2]),
+                               args.child[3] if len(args.child) > 3 else None)))
         return 0
     sys.path.insert(0, str(ROOT))
+    from itr_fft.fft_pair import fftw_available
+
     res: dict = {"old": args.old, "n": args.n, "solves": {}, "k_diff": {}, "operations": {}}
     with tempfile.TemporaryDirectory() as tmp:
         old_root = Path(tmp) / "old"
@@ -201,9 +212,13 @@ def main(argv: list[str] | None = None) -> int:
             tables = make_tables(Path(tmp), args.n)
             for name, table in tables.items():
                 rows: dict = {"old": [], "new": []}
+                versions = [("old", old_root, None), ("new", ROOT, None)]
+                if fftw_available():
+                    rows["new, fft='fftw'"] = []
+                    versions.append(("new, fft='fftw'", ROOT, "fftw"))
                 for rep in range(args.repeats):
-                    for version, root in (("old", old_root), ("new", ROOT)):
-                        r = run_child(root, table, name, args.n)
+                    for version, root, fft in versions:
+                        r = run_child(root, table, name, args.n, fft)
                         rows[version].append(r)
                         print(f"{name} {version} run {rep + 1}: {r['wall_s']:.2f} s, "
                               f"iterations {r['iterations']}, {r['preconditioner']}",
