@@ -9,7 +9,7 @@ import pytest
 
 import itr_fft
 import itr_fft.numba_backend as nb
-from itr_fft.fft_pair import PLANS_KEPT, _PLANS, fft_pair
+from itr_fft.fft_pair import _PLANS, PLANS_KEPT, fft_pair
 from validation.gallery import build
 
 pytest.importorskip("pyfftw")
