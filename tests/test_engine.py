@@ -156,12 +156,17 @@ def test_worker_limit_keeps_a_measured_250_cubed_worker_below_the_pause_mark():
     assert eng.worker_memory_limit(0) >= eng.WORKER_BASE_BYTES / 0.8
 
 
-def test_gpu_solves_go_only_to_workers_that_declare_a_gpu(rves):
+def test_gpu_solves_go_only_to_workers_that_declare_a_gpu(rves, monkeypatch):
     """A ``solver="gpu"`` request asks the scheduler for the worker resource GPU: a cluster
-    whose worker declares none holds it back; a worker that declares one runs it (here,
-    with no GPU in the machine, to the array-API backend's own clear error)."""
+    whose worker declares none holds it back; a worker that declares one runs it: a grid the
+    cost model sends to the CPU is solved there (the CPU's tensor), a grid it keeps on the
+    GPU reaches (here, with no GPU in the machine) the array-API backend's own clear
+    error."""
+    from dataclasses import replace
+
     from dask.distributed import Client, LocalCluster
 
+    import itr_fv.solvers.choice as choice
     from itr_fv.solvers.choice import worker_resources
 
     req = SolveRequest.for_materials(rves[0][1], MAT, 1e-8, solver="gpu")
@@ -184,11 +189,19 @@ def test_gpu_solves_go_only_to_workers_that_declare_a_gpu(rves):
         fut.cancel()
     if itr_fft.array_api_backend._cuda_available() is not None:
         pytest.skip("this machine has a GPU: the worker would solve, not fail")
+    cpu = SolveEngine(echo=lambda s: None).solve_one(
+        SolveRequest.for_materials(rves[0][1], MAT, 1e-8))
     with LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
                       dashboard_address=None, resources={"GPU": 1}) as gpu:
         with SolveEngine(scheduler=gpu.scheduler_address, echo=lambda s: None) as engine:
+            (res,) = engine.solve([req])          # a small grid: sooner on the CPU
+            np.testing.assert_allclose(res.k_diagonal, cpu.k_diagonal, rtol=1e-12)
+            on_gpu = replace(choice.SOLVERS["gpu"], seconds_per_solve=0.0,
+                             seconds_per_voxel=0.0)  # the model keeps every grid there
+            monkeypatch.setattr(choice, "SOLVERS", {**choice.SOLVERS, "gpu": on_gpu})
             with pytest.raises(ValueError, match="device: 'cuda'"):
-                engine.solve([req])
+                engine.solve([SolveRequest.for_materials(rves[0][1], MAT, 1e-9,
+                                                         solver="gpu")])
 
 
 def test_a_local_cluster_for_gpu_solves_is_refused_where_there_is_no_gpu(rves, tmp_path):
