@@ -278,11 +278,11 @@ class Workload:
         if avail is not None and not self.scheduler:
             mem += f" of {_gb(avail)} available"
         cores = os.cpu_count() or 1
-        routed = sorted({g.n for g in self.grids
-                         if grid_solver(self.solver, g.voxels) != self.solver})
+        goes_to = {g.n: grid_solver(self.solver, g.voxels) for g in self.grids}
+        routed = {n: to for n, to in sorted(goes_to.items()) if to != self.solver}
         solver = self.solver + (f", its {', '.join(f'{n}^3' for n in routed)} solves on the "
-                                f"CPU ({grid_solver(self.solver, 1)}: sooner there by the "
-                                "cost model)" if routed else "")
+                                f"CPU ({', '.join(sorted(set(routed.values())))}: sooner "
+                                "there by the cost model)" if routed else "")
         time = ("time: on the scheduler's workers" if self.scheduler else
                 f"about {_duration(self.seconds())} on {counted(cores, 'core')} (solver "
                 f"{solver}; an order of magnitude)")

@@ -64,27 +64,39 @@ def make_tables(folder: Path, n: int) -> dict[str, Path]:
     return out
 
 
+def materials(name: str):
+    """The RVE's materials: Table 1's conductivities, its R_b, R_ff = :data:`RFF`, per-area
+    contacts (public API of both versions)."""
+    from itr_fv import Materials
+    from itr_fv.materials.paper_data import PAPER_SYSTEM
+
+    filler, r_b = RVES[name]
+    return Materials(PAPER_SYSTEM.conductivities([filler]),
+                     {(filler, "silicone"): r_b, (filler, filler): RFF}, matrix="silicone",
+                     contact="area")
+
+
+def voxelised(table: Path, n: int):
+    """The sphere table voxelised on n^3 by the running version's ``from_spheres``."""
+    from itr_fv import Microstructure
+
+    with np.load(table, allow_pickle=False) as z:
+        return Microstructure.from_spheres(z["centers_m"], z["radii_m"],
+                                           [str(m) for m in z["material"]],
+                                           float(z["box_m"]), n, matrix="silicone")
+
+
 def child(table: Path, name: str, n: int, fft: str | None = None) -> dict:
     """In a fresh process of one version: voxelise, warm up, time the default solve (with
     ``fft`` where given: this checkout's optional FFT pair)."""
     import itr_fft
-    from itr_fv import Materials, Microstructure
-    from itr_fv.materials.paper_data import PAPER_SYSTEM
 
-    filler, r_b = RVES[name]
-    mat = Materials(PAPER_SYSTEM.conductivities([filler]),
-                    {(filler, "silicone"): r_b, (filler, filler): RFF}, matrix="silicone",
-                    contact="area")
-    with np.load(table, allow_pickle=False) as z:
-        centers, radii, material, box = (z["centers_m"], z["radii_m"],
-                                         [str(m) for m in z["material"]], float(z["box_m"]))
+    mat = materials(name)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        small = Microstructure.from_spheres(centers, radii, material, box, 24,
-                                            matrix="silicone")
         extra = {} if fft is None else {"fft": fft}
-        itr_fft.homogenize(small, mat, tol=1e-8, **extra)
-        ms = Microstructure.from_spheres(centers, radii, material, box, n, matrix="silicone")
+        itr_fft.homogenize(voxelised(table, 24), mat, tol=1e-8, **extra)
+        ms = voxelised(table, n)
         t = time.perf_counter()
         res = itr_fft.homogenize(ms, mat, tol=1e-8, **extra)
         wall = time.perf_counter() - t
@@ -107,18 +119,9 @@ def run_child(root: Path, table: Path, name: str, n: int, fft: str | None = None
 def per_operation(table: Path, name: str, n: int, calls: int = 20) -> dict:
     """Seconds per call of each operation of one CG iteration, this checkout."""
     from itr_fft.numba_backend import NumbaFFTBackend
-    from itr_fv import Materials, Microstructure
     from itr_fv.discrete.problem import DiscreteProblem
-    from itr_fv.materials.paper_data import PAPER_SYSTEM
 
-    filler, r_b = RVES[name]
-    mat = Materials(PAPER_SYSTEM.conductivities([filler]),
-                    {(filler, "silicone"): r_b, (filler, filler): RFF}, matrix="silicone",
-                    contact="area")
-    with np.load(table, allow_pickle=False) as z:
-        ms = Microstructure.from_spheres(z["centers_m"], z["radii_m"],
-                                         [str(m) for m in z["material"]], float(z["box_m"]),
-                                         n, matrix="silicone")
+    mat, ms = materials(name), voxelised(table, n)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         system = DiscreteProblem.for_materials(ms, mat).system(mat)
