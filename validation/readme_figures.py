@@ -6,13 +6,15 @@ at its defaults, in a new temporary folder, nothing reused) and the default test
 wall time, the child's peak resident memory, the output folder's size by part and the test
 counts in ``validation/results/readme_figures.json``. ``python validation/readme_figures.py
 write`` puts those numbers into README.md between the markers ``<!-- readme-figures -->``
-and ``<!-- /readme-figures -->``, and the figures of the result files the README quotes for
-issue 47 (the shipped data's headline, the box study, the contact films, the recovery)
-between ``<!-- result-figures -->`` and ``<!-- /result-figures -->``, and those of issue 48
-(the paper's system as a file, the second system) between ``<!-- system-figures -->`` and
-``<!-- /system-figures -->``, and those of issue 49 (the discrepancy workflow's naming rule
-and Table 3's verdict) between ``<!-- discrepancy-figures -->`` and
-``<!-- /discrepancy-figures -->``; nothing there is typed by hand. ``all`` does both.
+and ``<!-- /readme-figures -->``, and the figures of the result files the documentation
+quotes between markers in its pages: issue 47's (the shipped data's headline, the box study,
+the contact films, the recovery) in docs/reproduce.md between ``<!-- result-figures -->``
+and ``<!-- /result-figures -->``, issue 48's (the paper's system as a file, the second
+system) in docs/own_system.md between ``<!-- system-figures -->`` and
+``<!-- /system-figures -->``, and issue 49's (the discrepancy workflow's naming rule and
+Table 3's verdict) in docs/discrepancy.md between ``<!-- discrepancy-figures -->`` and
+``<!-- /discrepancy-figures -->``; nothing there is typed by hand (``BLOCKS`` lists each
+file and its markers). ``all`` does both.
 Options: ``--skip-tests`` (keep the recorded test figures), ``--skip-reproduce``.
 """
 
@@ -42,6 +44,7 @@ RESULTS_BEGIN, RESULTS_END = "<!-- result-figures -->", "<!-- /result-figures --
 SYSTEM_BEGIN, SYSTEM_END = "<!-- system-figures -->", "<!-- /system-figures -->"
 DISCREPANCY_BEGIN, DISCREPANCY_END = ("<!-- discrepancy-figures -->",
                                       "<!-- /discrepancy-figures -->")
+DOCS = ROOT / "docs"
 ITR = [sys.executable, "-m", "itr_identify.cli"]
 
 
@@ -365,11 +368,21 @@ def _replace(path: Path, begin: str, end: str, text: str) -> None:
     path.write_text(f"{head}{begin}\n{wrapped}\n{end}{tail}")
 
 
+#: Each written block: the file that holds it, its markers, and what writes its text (the
+#: README keeps the main job's and the tests' figures; the studies' figures are in the pages
+#: of docs/ that explain them).
+BLOCKS = [
+    (README, BEGIN, END, block),
+    (DOCS / "reproduce.md", RESULTS_BEGIN, RESULTS_END, lambda data: results_block()),
+    (DOCS / "own_system.md", SYSTEM_BEGIN, SYSTEM_END, lambda data: system_block()),
+    (DOCS / "discrepancy.md", DISCREPANCY_BEGIN, DISCREPANCY_END,
+     lambda data: discrepancy_block()),
+]
+
+
 def write(data: dict) -> None:
-    _replace(README, BEGIN, END, block(data))
-    _replace(README, RESULTS_BEGIN, RESULTS_END, results_block())
-    _replace(README, SYSTEM_BEGIN, SYSTEM_END, system_block())
-    _replace(README, DISCREPANCY_BEGIN, DISCREPANCY_END, discrepancy_block())
+    for path, begin, end, text in BLOCKS:
+        _replace(path, begin, end, text(data))
 
 
 def main() -> None:
