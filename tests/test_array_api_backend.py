@@ -16,6 +16,7 @@ import math
 
 import numpy as np
 import pytest
+from refusals import refuses
 
 import itr_fft
 from itr_fft import _kernels as K
@@ -142,9 +143,9 @@ def test_the_multigrid_on_the_backends_arrays_equals_the_numba_multigrid(case, n
 
 
 def test_kernel_and_preconditioner_options_are_checked():
-    with pytest.raises(ValueError, match="^preconditioner: expected one of"):
+    with refuses(ValueError, "preconditioner"):
         ArrayAPIBackend(device="cpu", preconditioner="jacobi")
-    with pytest.raises(ValueError, match="^kernels: expected one of"):
+    with refuses(ValueError, "kernels"):
         ArrayAPIBackend(device="cpu", kernels="triton")
     assert ArrayAPIBackend(device="cpu", preconditioner="multigrid").options()[
         "preconditioner"] == "multigrid"
@@ -154,7 +155,7 @@ def test_kernel_and_preconditioner_options_are_checked():
     from itr_fft.fused_kernels import fused_available
 
     if not fused_available():  # CI: no CUDA and no simulator in this process
-        with pytest.raises(ValueError, match="^kernels: 'fused' needs numba's CUDA target"):
+        with refuses(ValueError, "kernels"):
             homogenize(ms, mat, backend=ArrayAPIBackend(device="cpu", kernels="fused"),
                        tol=1e-8)
     res = homogenize(ms, mat, backend=ArrayAPIBackend(device="cpu"), tol=1e-8)
@@ -179,7 +180,7 @@ def test_float32_ffts_with_float64_vectors(case):
     assert default.fft_dtype_for() == np.float64 and "fft_dtype" not in default.options()
     assert ArrayAPIBackend(device="cpu", dtype=np.float32,
                            fft_dtype=np.float64).fft_dtype_for() == np.float32
-    with pytest.raises(ValueError, match="fft_dtype"):
+    with refuses(ValueError, "fft_dtype"):
         ArrayAPIBackend(device="cpu", fft_dtype=np.float16)
 
 
@@ -189,7 +190,7 @@ def test_float32_vectors_under_the_strict_namespace():
                                                       dtype=np.float32),
                      tol=4e-6, store_fields=False)
     assert np.abs(res.k_eff - ref.k_eff).max() <= 1e-5 * np.abs(ref.k_eff).max()
-    with pytest.raises(ValueError, match="tol"):
+    with refuses(ValueError, "tol"):
         homogenize(ms, mat, backend=ArrayAPIBackend(device="cpu", dtype=np.float32),
                    tol=1e-9)
 
@@ -203,17 +204,17 @@ def test_registered_by_name_and_warm_start():
 
 
 def test_device_choices_are_checked():
-    with pytest.raises(ValueError, match="device"):
+    with refuses(ValueError, "device"):
         ArrayAPIBackend(device="tpu")
-    with pytest.raises(ValueError, match="namespace"):
+    with refuses(ValueError, "namespace"):
         ArrayAPIBackend(device="cpu", namespace="jax")
-    with pytest.raises(ValueError, match="namespace"):
+    with refuses(ValueError, "namespace"):
         ArrayAPIBackend(device="cpu", namespace="cupy")
-    with pytest.raises(ValueError, match="dtype"):
+    with refuses(ValueError, "dtype"):
         ArrayAPIBackend(device="cpu", dtype=np.float16)
     if _cuda_available() is None:
         assert resolve_device("auto") == ("cpu", "numpy")
-        with pytest.raises(ValueError, match="device: 'cuda'"):
+        with refuses(ValueError, "device"):
             ArrayAPIBackend(device="cuda")
 
 
@@ -222,7 +223,7 @@ def test_solver_choices_for_the_campaign_engine():
     assert worker_resources("fft") is None and worker_resources("mg") is None
     mg = solver_backend("mg", threads=1)
     assert mg.name == "itr_fft" and mg.preconditioner == "multigrid" and mg.workers == 1
-    with pytest.raises(ValueError, match="solver"):
+    with refuses(ValueError, "solver"):
         worker_resources("quantum")
 
 

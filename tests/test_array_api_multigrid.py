@@ -14,6 +14,7 @@ import importlib.util
 
 import numpy as np
 import pytest
+from refusals import refuses
 
 from itr_fft.array_api_backend import ArrayAPIOps, _cuda_available, _Operator
 from itr_fft.array_api_multigrid import (
@@ -170,18 +171,18 @@ def test_bad_arguments_raise_naming_them():
     g = np.ones((3, 4, 4, 4))
     ids = np.zeros((4, 4, 4), dtype=np.int32)
     ids[:2] = 1
-    with pytest.raises(ValueError, match="dtype"):
+    with refuses(ValueError, "dtype"):
         ArrayAPIMultigrid(xp, g, ids, dtype=np.float16)
-    with pytest.raises(ValueError, match="groups"):
+    with refuses(ValueError, "groups"):
         ArrayAPIMultigrid(xp, g, ids[:3])
-    with pytest.raises(ValueError, match="g_device"):
+    with refuses(ValueError, "g_device"):
         ArrayAPIMultigrid(xp, g, ids, dtype=np.float32, g_device=xp.asarray(g))
     mg = ArrayAPIMultigrid(xp, g, ids)
-    with pytest.raises(ValueError, match="r: expected shape"):
+    with refuses(ValueError, "r"):
         mg.apply(xp.zeros((4, 4, 3)))
-    with pytest.raises(ValueError, match="groups"):
+    with refuses(ValueError, "groups"):
         ArrayAPIDeflation(xp, g, None, mg)
-    with pytest.raises(ValueError, match="g64"):
+    with refuses(ValueError, "g64"):
         ArrayAPIDeflation(xp, g, ids, mg, g64=xp.asarray(g, dtype=xp.float32))
 
 

@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+from refusals import refuses
 
 from itr_surrogate.baselines import (
     BASELINES,
@@ -65,14 +66,14 @@ def test_metrics_match_their_formulas():
     assert max_relative_error(y, p) == pytest.approx(0.1)
 
 
-@pytest.mark.parametrize("call,match", [
-    (lambda: make_baseline("forest", feature_names=NAMES), "name: expected one of"),
+@pytest.mark.parametrize("call,argument", [
+    (lambda: make_baseline("forest", feature_names=NAMES), "name"),
     (lambda: make_baseline("svr", feature_names=NAMES, seed=-1), "seed"),
     (lambda: precision_check(lambda X: X[:, 0], feature_names=NAMES, base={},
-                             feature="R_Al2O3_silicone", values=[1e-8]), "base: no value"),
+                             feature="R_Al2O3_silicone", values=[1e-8]), "base"),
     (lambda: precision_check(lambda X: X[:, 0], feature_names=NAMES, base={},
                              feature="k_AlN", values=[1.0]), "feature"),
 ])
-def test_bad_input_names_the_argument(call, match):
-    with pytest.raises(ValueError, match=match):
+def test_bad_input_names_the_argument(call, argument):
+    with refuses(ValueError, argument):
         call()

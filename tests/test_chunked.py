@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from refusals import refuses
 
 from itr_identify.inference import chunked, marginal
 from itr_identify.inference.chunked import map_chunks
@@ -20,7 +21,7 @@ def test_chunks_come_back_in_order_and_equal_a_serial_pass():
     for workers in (1, 2, 3):
         got = np.concatenate(list(map_chunks(_f, x, chunk=997, workers=workers)))
         np.testing.assert_array_equal(got, serial)
-    with pytest.raises(ValueError, match="^chunk"):
+    with refuses(ValueError, "chunk"):
         list(map_chunks(_f, x, chunk=0))
 
 

@@ -10,6 +10,7 @@ import warnings
 import array_api_strict as xs
 import numpy as np
 import pytest
+from refusals import refuses
 
 from itr_fv import Materials
 from itr_fv.discrete import face_classes as face_classes_module
@@ -353,12 +354,12 @@ def test_a_label_image_with_contacts_has_no_gap_model():
 # ------------------------------------------------------------------------- bad input
 def test_bad_namespaces_and_devices_name_the_argument():
     problem, _ = _touching("sc", "staircase")
-    with pytest.raises(ValueError, match="device: 'cuda' needs its array namespace xp"):
+    with refuses(ValueError, "device"):
         problem.face_classes(device="cuda")
-    with pytest.raises(ValueError, match="xp: expected an array API namespace"):
+    with refuses(ValueError, "xp"):
         problem.geometry.face_classes().to(object())
     strict = problem.face_classes(xp=xs)
-    with pytest.raises(ValueError, match="xp: classes move from the host"):
+    with refuses(ValueError, "xp"):
         strict.to(np)
 
 

@@ -12,6 +12,7 @@ import warnings
 
 import numpy as np
 import pytest
+from refusals import refuses
 
 from itr_fv.discrete import _geometry_kernels as K
 from itr_fv.discrete.contact_zones import zone_table
@@ -120,9 +121,9 @@ def test_a_stated_film_keeps_the_voxels_and_is_checked(cheap):
     assert thick.particle_ids is cheap.particle_ids
     assert thick.particles.contact == ContactFilm(5e-9, 0.0, 1e-3)
     assert cheap.particles.contact.film_m == 0.0
-    with pytest.raises(ValueError, match="film_m"):
+    with refuses(ValueError, "film_m"):
         cheap.with_film(-1e-9)
-    with pytest.raises(ValueError, match="tolerance"):
+    with refuses(ValueError, "tolerance"):
         ContactFilm(tolerance=0.5)
 
 

@@ -5,6 +5,7 @@ import warnings
 
 import numpy as np
 import pytest
+from refusals import refuses
 
 import itr_fft
 import itr_fv
@@ -114,7 +115,7 @@ def test_gap_model_needs_particle_geometry_and_the_matrix_pairs():
     pid[4:] = 2
     two = Microstructure.from_labels((pid > 0).astype(int), pid, voxel_m=1e-7,
                                      names=("silicone", "Al2O3"))
-    with pytest.raises(ValueError, match="contact: the gap model needs the particle geometry"):
+    with refuses(ValueError, "contact"):
         itr_fft.homogenize(two, gap_materials(), tol=1e-8)
     with pytest.raises(ValueError, match=r"resistance.*'Al2O3', 'silicone'"):
         itr_fft.homogenize(ms, Materials({"silicone": K_M, "Al2O3": 30.0}, {}, "silicone",
@@ -124,7 +125,7 @@ def test_gap_model_needs_particle_geometry_and_the_matrix_pairs():
 def test_a_geometry_is_built_for_one_contact_model():
     ms, _ = sc_cell(1.5e-9, 8)
     geom = face_geometry(ms, contact="area")
-    with pytest.raises(ValueError, match="geometry: built for contact='area'"):
+    with refuses(ValueError, "geometry"):
         geom.conductances(gap_materials())
 
 
@@ -169,13 +170,13 @@ def test_one_discrete_problem_serves_many_parameter_sets():
         assert all(isinstance(r, int) and 0 <= r <= 5 for r in reused.info["restarts"])
         fv = itr_fv.homogenize(problem, mat, tol=1e-10)
         np.testing.assert_allclose(fv.k_eff, fresh.k_eff, rtol=1e-6, atol=1e-9)
-    with pytest.raises(ValueError, match="mat: uses contact='area'"):
+    with refuses(ValueError, "mat"):
         itr_fft.homogenize(problem, Materials({"silicone": K_M, "Al2O3": 30.0},
                                               {("Al2O3", "silicone"): 2e-8}, "silicone",
                                               contact="area"))
-    with pytest.raises(ValueError, match="geometry: a DiscreteProblem already holds"):
+    with refuses(ValueError, "geometry"):
         itr_fft.homogenize(problem, gap_materials(), geometry=problem.geometry)
-    with pytest.raises(ValueError, match="contact: expected one of"):
+    with refuses(ValueError, "contact"):
         DiscreteProblem(ms, contact="film")
 
 

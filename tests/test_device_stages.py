@@ -17,6 +17,7 @@ import functools
 import array_api_strict
 import numpy as np
 import pytest
+from refusals import refuses
 
 from itr_fft import _kernels as K
 from itr_fft.array_api_backend import ArrayAPIBackend, _Prepared, to_numpy
@@ -117,7 +118,7 @@ def test_load_vector_is_the_numba_kernel(namespace):
     got = load_vector(xp.asarray(g), h, E)
     assert type(got).__module__.split(".")[0] == namespace and got.dtype == xp.float64
     assert _rel(to_numpy(got), expected) <= 1e-13
-    with pytest.raises(ValueError, match="E"):
+    with refuses(ValueError, "E"):
         load_vector(xp.asarray(g), h, (1.0, 0.0))
 
 
@@ -145,7 +146,7 @@ def test_fluxes_and_tensors_are_the_face_sums(namespace):
     q = to_numpy(face_fluxes(gx, tx[0], h, E))
     for d in range(3):
         assert _rel(q[d].ravel(), g[d].ravel() * _drops(thetas[0], d, h, E[d])) <= 1e-13
-    with pytest.raises(ValueError, match="directions"):
+    with refuses(ValueError, "directions"):
         effective_tensors(gx, tx, h, (0,))
 
 
@@ -190,9 +191,9 @@ def test_cluster_projection_removes_every_cluster_mean(namespace, dtype):
     connected = xp.asarray(v.copy())
     ClusterProjection(None, like=like).project(connected)
     assert abs(float(np.mean(to_numpy(connected), dtype=np.float64))) <= tol * np.abs(v).max()
-    with pytest.raises(ValueError, match="labels"):
+    with refuses(ValueError, "labels"):
         ClusterProjection(labels.astype(np.float64))
-    with pytest.raises(ValueError, match="labels"):
+    with refuses(ValueError, "labels"):
         ClusterProjection(labels + 1)  # no voxel in cluster 0
 
 

@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 import pytest
+from refusals import refuses
 
 from itr_fv.materials.paper_data import TABLE1
 from itr_fv.rve import FillerSpec
@@ -155,12 +156,11 @@ def test_values_outside_the_domain_or_beyond_the_voxel_are_refused(al55):
                        ("basis", 1.5)):
         with pytest.raises(ValueError, match=f"of '{key}' lies outside"):
             by_key([key])[0].rebuild(pack, ms, value, seed=3)
-    with pytest.raises(ValueError, match="must be a factor > 0"):
+    with refuses(ValueError, "value"):
         InterphaseShell().materials_in(ms, al55[0].materials(R), 0.0)
     # AlN read as volume-weighted: its fine particles are below two 0.5 um voxels
     _, aln, aln_pack = packed("AlN", 0.55)
-    with pytest.raises(ValueError, match=r"basis: the RVE at volume_basis_share = 0.9 "
-                                         r"cannot be packed \(voxel_um"):
+    with pytest.raises(ValueError, match=r"^basis: .*\(voxel_um: "):  # the packer's reason
         SizeBasis().rebuild(aln_pack, aln, 0.9, seed=3)
 
 

@@ -5,6 +5,7 @@ import math
 
 import numpy as np
 import pytest
+from refusals import refuses
 
 from itr_fv.materials import default_system
 from itr_fv.rve.spec import RVESpec
@@ -37,7 +38,7 @@ def test_the_library_holds_five_distinct_effects():
     assert len(lib) >= 5
     assert len({e.name for e in lib}) == len({e.key for e in lib}) == len(lib)
     assert [e.key for e in fx.by_key(["spots", "matrix"])] == ["spots", "matrix"]
-    with pytest.raises(ValueError, match="unknown effect 'shape'"):
+    with refuses(ValueError, "effects"):
         fx.by_key(["shape"])
     assert {e.kind for e in lib} == {"material", "geometry", "measurement", "variance"}
     for e in lib:
@@ -75,7 +76,7 @@ def test_porosity_homogenises_air_into_the_matrix_at_its_share_of_the_matrix(rve
         assert mat.conductivity["Al2O3"] == base.conductivity["Al2O3"]
     # the same void fraction takes a larger share of the matrix at a higher filler fraction
     assert por.materials_in(ms, base, 0.1).conductivity["silicone"] < maxwell(k_m, 0.1)
-    with pytest.raises(ValueError, match="value"):
+    with refuses(ValueError, "value"):
         por.materials_in(ms, base, 0.4)
 
 

@@ -7,6 +7,7 @@ import os
 
 import numpy as np
 import pytest
+from refusals import refuses
 
 import itr_fft
 from itr_fv import Materials
@@ -54,7 +55,7 @@ def test_request_keys_follow_parameters_tolerance_and_solver(rves):
     assert a.key != SolveRequest.for_materials(rve, MAT, 1e-8, solver="fv").key
     assert a.key != SolveRequest.for_materials(
         rve, MAT.with_parameters({"R_Al2O3_silicone": 2.1e-8}), 1e-8).key
-    with pytest.raises(ValueError, match="solver"):
+    with refuses(ValueError, "solver"):
         SolveRequest.for_materials(rve, MAT, 1e-8, solver="quantum")
 
 
@@ -128,9 +129,9 @@ def test_a_local_cluster_gives_the_serial_numbers(rves, tmp_path):
 
 
 def test_bad_engine_arguments():
-    with pytest.raises(ValueError, match="workers"):
+    with refuses(ValueError, "workers"):
         SolveEngine(workers=0)
-    with pytest.raises(ValueError, match="--scheduler: cannot reach"):
+    with refuses(ValueError, "--scheduler"):
         eng.open_client(None, "tcp://127.0.0.1:9", memory_per_worker=10**9)
 
 
@@ -199,7 +200,7 @@ def test_gpu_solves_go_only_to_workers_that_declare_a_gpu(rves, monkeypatch):
             on_gpu = replace(choice.SOLVERS["gpu"], seconds_per_solve=0.0,
                              seconds_per_voxel=0.0)  # the model keeps every grid there
             monkeypatch.setattr(choice, "SOLVERS", {**choice.SOLVERS, "gpu": on_gpu})
-            with pytest.raises(ValueError, match="device: 'cuda'"):
+            with refuses(ValueError, "device"):
                 engine.solve([SolveRequest.for_materials(rves[0][1], MAT, 1e-9,
                                                          solver="gpu")])
 

@@ -6,6 +6,7 @@ import functools
 
 import numpy as np
 import pytest
+from refusals import refuses
 
 import itr_fft
 import itr_fv
@@ -145,7 +146,7 @@ def test_float32_option_agrees():
     r32 = itr_fft.homogenize(ms, mat, tol=2e-6, dtype=np.float32, store_fields=False)
     assert r32.converged and r32.info["dtype"] == "float32"
     assert _rel(r32.k_eff, r64.k_eff) <= 1e-6
-    with pytest.raises(ValueError, match="tol"):
+    with refuses(ValueError, "tol"):
         itr_fft.homogenize(ms, mat, tol=1e-7, dtype=np.float32)
 
 
@@ -160,15 +161,15 @@ def test_reference_conductivity_does_not_change_iterations():
 
 def test_argument_checks_and_callback():
     ms, mat = build("sc_R0", 16)
-    with pytest.raises(ValueError, match="dtype"):
+    with refuses(ValueError, "dtype"):
         itr_fft.homogenize(ms, mat, dtype=np.int32)
-    with pytest.raises(ValueError, match="workers"):
+    with refuses(ValueError, "workers"):
         itr_fft.homogenize(ms, mat, workers=0)
-    with pytest.raises(ValueError, match="x0"):
+    with refuses(ValueError, "x0"):
         itr_fft.homogenize(ms, mat, x0=np.zeros((2, 16, 16, 16)))
-    with pytest.raises(ValueError, match="tol"):
+    with refuses(ValueError, "tol"):
         itr_fft.homogenize(ms, mat, tol=2.0)
-    with pytest.raises(ValueError, match="directions"):
+    with refuses(ValueError, "directions"):
         itr_fft.homogenize(ms, mat, directions=(3,))
     seen = []
     res = itr_fft.homogenize(ms, mat, directions=(1,), callback=lambda *a: seen.append(a))

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from refusals import refuses
 
 import itr_fft
 import itr_fft.numba_backend as nb
@@ -46,5 +47,5 @@ def test_fftw_without_pyfftw_is_refused_in_one_line(monkeypatch):
     monkeypatch.setattr(nb, "fftw_available", lambda: False)
     with pytest.raises(ValueError, match=r"fft: 'fftw' needs pyFFTW \(pip install"):
         nb.NumbaFFTBackend(fft="fftw")
-    with pytest.raises(ValueError, match="fft: expected one of"):
+    with refuses(ValueError, "fft"):
         nb.NumbaFFTBackend(fft="mkl")

@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 import pytest
+from refusals import refuses
 
 from itr_fv.rve.spec import RVESpec
 from itr_identify.forward.fidelity import (
@@ -27,13 +28,13 @@ def test_richardson_recovers_the_limit_of_an_exact_power_law():
     fine, coarse = k0 * (1 - c * h ** p), k0 * (1 - c * H ** p)
     assert richardson(np.array([fine]), np.array([coarse]), H / h, p)[0] == pytest.approx(k0,
                                                                                          rel=1e-12)
-    with pytest.raises(ValueError, match="ratio"):
+    with refuses(ValueError, "ratio"):
         richardson(fine, coarse, 1.0, p)
 
 
 @pytest.mark.parametrize("change, match", [
     ({"coarse_voxel_um": 0.2}, "coarse_voxel_um"),
-    ({"boxes_um": (("Al2O3", 10.5),)}, "a 10.5 um box holds 52.5 voxels of 0.2 um"),
+    ({"boxes_um": (("Al2O3", 10.5),)}, "box_um/voxel_um"),
     ({"boxes_um": (("Al2O3", 10.1),)}, "box_um/voxel_um"),
     ({"packings": 1}, "packings"),
     ({"move_tolerance": 0.0}, "move_tolerance"),
@@ -41,7 +42,7 @@ def test_richardson_recovers_the_limit_of_an_exact_power_law():
 ])
 def test_bad_faithful_settings_name_the_argument(change, match):
     kw = {"boxes_um": (("Al2O3", 12.0),), "voxel_um": 0.2, "coarse_voxel_um": 0.25, **change}
-    with pytest.raises(ValueError, match=match):
+    with refuses(ValueError, match):
         FaithfulRVE(**kw)
 
 
@@ -51,9 +52,9 @@ def test_fidelity_levels_are_named_and_checked():
         fa = faithful_for(name)
         assert fa.name == name and fa.voxel_um < fa.coarse_voxel_um
     assert FIDELITY_LEVELS["paper"].box_for(["Al2O3", "AlN"]) >= 40.0
-    with pytest.raises(ValueError, match="fidelity"):
+    with refuses(ValueError, "fidelity"):
         faithful_for("best")
-    with pytest.raises(ValueError, match="boxes_um: no faithful box for BN"):
+    with refuses(ValueError, "boxes_um"):
         FIDELITY_LEVELS["standard"].box_for(["BN"])
 
 

@@ -12,6 +12,7 @@ import math
 
 import numpy as np
 import pytest
+from refusals import refuses
 from scipy import stats
 
 from itr_identify.forward.model import ForwardSettings
@@ -55,7 +56,7 @@ def test_chi_square_tail_is_scipys():
     for chi2, dof in [(3.0, 1), (10.4, 10), (104.3, 10), (0.0, 4), (25.0, 6)]:
         assert chi_square_p(chi2, dof) == pytest.approx(stats.chi2.sf(chi2, dof), rel=1e-10,
                                                         abs=1e-300)
-    with pytest.raises(ValueError, match="dof"):
+    with refuses(ValueError, "dof"):
         chi_square_p(1.0, 0)
 
 

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from refusals import refuses
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
@@ -69,5 +70,5 @@ def test_the_test_is_of_the_model_alone():
     tables = _tables()
     lik = JointLikelihood(tables, Measurements({f: np.ones(4) for f in FORMS}, "x"),
                           _space(tables), scatter=SCATTER)
-    with pytest.raises(ValueError, match="^likelihood: build it without the model form"):
+    with refuses(ValueError, "likelihood"):
         fit_with_inputs_free(lik)

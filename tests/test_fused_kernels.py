@@ -21,6 +21,7 @@ from typing import Any
 
 import numpy as np
 import pytest
+from refusals import refuses
 
 ROOT = Path(__file__).resolve().parents[1]
 SHAPES = ((5, 6, 7), (8, 8, 8))
@@ -256,11 +257,11 @@ def test_block_cg_with_the_fused_block_kernel_equals_single_solves(simulated, ca
 
 def test_bad_input_is_named_without_a_device():
     from itr_fft.fused_kernels import FusedOperator, FusedOps
-    with pytest.raises(ValueError, match="g:"):
+    with refuses(ValueError, "g"):
         FusedOperator(np.ones((2, 4, 4, 4)))
-    with pytest.raises(ValueError, match="g:"):
+    with refuses(ValueError, "g"):
         FusedOperator(np.ones((3, 4, 4, 4), dtype=np.int64))
-    with pytest.raises(ValueError, match="threads_per_block"):
+    with refuses(ValueError, "threads_per_block"):
         FusedOps(threads_per_block=6)
 
 
@@ -295,7 +296,7 @@ def test_auto_falls_back_to_the_portable_kernels_where_the_fused_ones_do_not_bui
     with warnings.catch_warnings():  # said once: the second solve falls back silently
         warnings.simplefilter("error")
         assert _use_fused("auto", "cuda", "cupy", np) is False
-    with pytest.raises(ValueError, match="kernels: the fused kernels do not run here"):
+    with refuses(ValueError, "kernels"):
         _use_fused("fused", "cuda", "cupy", np)
     assert _use_fused("portable", "cuda", "cupy", np) is False
     monkeypatch.setattr(fk, "fused_failure", lambda xp: None)

@@ -5,6 +5,7 @@ import math
 import numpy as np
 import pytest
 from conftest import sc_sphere
+from refusals import refuses
 
 from itr_fv import Materials, Microstructure, homogenize
 
@@ -92,7 +93,7 @@ def test_bad_microstructures(build, name):
 ])
 def test_bad_solver_arguments(kwargs, name):
     ms = sc_sphere(8, 0.2)
-    with pytest.raises(ValueError, match=name):
+    with refuses(ValueError, name):
         homogenize(ms, Materials(K, R, "matrix"), **kwargs)
 
 
@@ -102,9 +103,9 @@ def test_unknown_phase_and_missing_pair_are_named():
         homogenize(ms, Materials({"matrix": 1.0, "glass": 2.0}, {}, "matrix"))
     with pytest.raises(ValueError, match=r"resistance.*\('filler', 'matrix'\)"):
         homogenize(ms, Materials(K, {}, "matrix"))
-    with pytest.raises(ValueError, match="mat"):
+    with refuses(ValueError, "mat"):
         homogenize(ms, Materials({"silicone": 1.0, "filler": 2.0}, {}, "silicone"))
-    with pytest.raises(ValueError, match="mat"):
+    with refuses(ValueError, "mat"):
         homogenize(ms, {"matrix": 1.0})
     with pytest.raises(ValueError, match="ms"):
         homogenize(np.zeros((4, 4, 4)), Materials(K, R, "matrix"))

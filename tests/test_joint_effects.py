@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from refusals import refuses
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
@@ -77,7 +78,7 @@ def test_a_ratio_table_is_exact_for_a_bilinear_ratio_and_held_at_its_edges():
     r, x = rng.uniform(-9.4, -5.6, 100), rng.uniform(0.8, 1.0, 100)
     np.testing.assert_allclose(t(r, x), 0.3 * (x - 1) * (r + 10), atol=1e-12)
     assert t(np.array([-12.0]), np.array([0.5]))[0] == pytest.approx(0.3 * -0.2 * 0.6)
-    with pytest.raises(ValueError, match=r"^ln_ratio: expected shape"):
+    with refuses(ValueError, "ln_ratio"):
         RatioTable(np.arange(3.0), np.arange(2.0), np.zeros((2, 3)))
 
 
@@ -213,7 +214,7 @@ def test_the_rule_names_ties_and_says_unexplained_as_its_notes_say():
     # one of the tied fits: a tie
     v = decide(base_bad, [_fit("a", 5.0, 1e-3), _fit("b", 4.2, 0.3)], s)
     assert (v.verdict, v.tied) == ("tie", ("a", "b"))
-    with pytest.raises(ValueError, match=r"^tie_margin"):
+    with refuses(ValueError, "tie_margin"):
         NamingSettings(tie_margin=5.0)
 
 

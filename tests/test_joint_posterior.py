@@ -8,6 +8,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from refusals import refuses
 
 from itr_identify.inference.formulations import fractions_of
 from itr_identify.inference.joint import (
@@ -115,7 +116,7 @@ def test_the_space_holds_every_input_the_shared_terms_and_the_model_form():
     u = rng.uniform(size=(20000, space.dim))
     v = space.from_unit(u)
     assert v[:, space.names.index("ln k_AlN")].std() == pytest.approx(0.25, rel=0.03)
-    with pytest.raises(ValueError, match=r"^hold: 'k_silicone' is no parameter"):
+    with refuses(ValueError, "hold"):
         _space(tables, hold={"k_silicone": 0.2})
     off = _space(tables, model_form=ModelFormPrior(on=False))
     assert not any(n.startswith("slope_") for n in off.names)

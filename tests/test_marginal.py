@@ -2,6 +2,7 @@
 
 import numpy as np
 import pytest
+from refusals import refuses
 from scipy import stats
 
 from itr_identify.inference.marginal import Marginal, rao_blackwell
@@ -46,9 +47,9 @@ def test_a_flat_tail_is_integrated_not_counted():
 
 @pytest.mark.parametrize("bad, match", [
     ({"x": np.array([0.0, 1.0]), "density": np.array([1.0, 1.0])}, "x"),
-    ({"x": np.array([0.0, 2.0, 1.0]), "density": np.ones(3)}, "increase"),
+    ({"x": np.array([0.0, 2.0, 1.0]), "density": np.ones(3)}, "x"),
     ({"x": np.arange(4.0), "density": np.array([0.0, -1.0, 1.0, 1.0])}, "density"),
 ])
 def test_bad_grids_are_refused(bad, match):
-    with pytest.raises(ValueError, match=match):
+    with refuses(ValueError, match):
         Marginal(**bad)

@@ -4,6 +4,7 @@ import math
 
 import numpy as np
 import pytest
+from refusals import refuses
 
 from itr_identify.inference.measurements import (
     conductivity_from_impedance,
@@ -87,5 +88,5 @@ def test_bad_files_are_one_line_errors(tmp_path, kind, text, match):
 
 
 def test_a_missing_file_names_the_path(tmp_path):
-    with pytest.raises(ValueError, match="does not exist"):
+    with refuses(ValueError, "path"):
         read_measurements(tmp_path / "none.csv")

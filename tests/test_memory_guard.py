@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 from conftest import sc_sphere
+from refusals import refuses
 
 import itr_fft
 import itr_fv
@@ -31,7 +32,7 @@ def test_estimates_scale_with_voxels_and_rank_the_solvers():
     assert fv > 60e9
     fields = estimate_peak_memory((400, 400, 400), "itr_fft", store_fields=True, load_cases=3)
     assert fields - mg == 400**3 * 3 * resources.FIELD_BYTES_PER_VOXEL_CASE
-    with pytest.raises(ValueError, match="solver.*unknown 'itr_gpu'"):
+    with refuses(ValueError, "solver"):
         estimate_peak_memory((8, 8, 8), "itr_gpu")
     # a configured backend object gives its own cost
     assert estimate_peak_memory((10, 10, 10), itr_fft.NumbaFFTBackend(

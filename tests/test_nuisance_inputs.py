@@ -15,6 +15,7 @@ import warnings
 
 import numpy as np
 import pytest
+from refusals import refuses
 
 from itr_fv.materials import default_system
 from itr_identify.inference.calibrate import calibrate
@@ -108,10 +109,10 @@ def test_a_truth_off_its_nominal_matrix_is_inside_the_marginal_interval(models):
 def test_a_prior_off_the_models_conductivity_is_refused(models):
     meas = measured(models)
     nominal = calibrate(models, meas, grid_points=21, n_samples=200)
-    with pytest.raises(ValueError, match="k_silicone"):
+    with refuses(ValueError, "k_silicone"):
         marginalise(models, meas, nominal, {"k_silicone": InputPrior("k_silicone", 0.2, 0.1)},
                     elasticity=ELASTICITY)
-    with pytest.raises(ValueError, match="conductivity"):
+    with refuses(ValueError, "name"):
         InputPrior("R_AlN_silicone", 1e-8, 0.1)
 
 
@@ -198,11 +199,11 @@ def test_a_film_prior_without_the_film_elasticity_or_with_a_bad_range_is_refused
 
     meas = measured(models)
     nominal = calibrate(models, meas, grid_points=21, n_samples=200)
-    with pytest.raises(ValueError, match="elasticity"):
+    with refuses(ValueError, "elasticity"):
         marginalise(models, meas, nominal, {"film_nm": FilmPrior()}, elasticity=ELASTICITY)
-    with pytest.raises(ValueError, match="low_nm < high_nm"):
+    with refuses(ValueError, "film"):
         FilmPrior(3.0, 1.0)
-    with pytest.raises(ValueError, match="high_nm"):
+    with refuses(ValueError, "film high_nm"):
         FilmPrior(0.0, 50.0)
 
 
@@ -227,5 +228,5 @@ def test_the_film_is_marginalised_by_default_only_where_none_is_stated():
     assert set(area) == {"k_silicone", "k_Al2O3"}        # the per-area model has no film
     thick = ForwardSettings(rve=RVESpec(box_um=12.0, voxel_um=0.25, film_um=0.003))
     meas = Measurements({"Al2O3-60": [1.6, 1.62]}, "stub")
-    with pytest.raises(ValueError, match="film 0"):
+    with refuses(ValueError, "inputs"):
         identify(meas, "gap", settings=thick, inputs={"film_nm": DEFAULT_FILM})

@@ -11,6 +11,7 @@ import warnings
 
 import numpy as np
 import pytest
+from refusals import refused, refuses
 
 from itr_fv import Microstructure
 from itr_fv.analytic import hashin_shtrikman, hashin_shtrikman_multiphase
@@ -59,7 +60,7 @@ def test_multiphase_bounds_are_the_two_phase_bounds_and_order_the_phases():
     assert hashin_shtrikman_multiphase([0.4, 0.6], [0.18, 30.0])[1] < hi3
     assert hi3 < hashin_shtrikman_multiphase([0.4, 0.6], [0.18, 200.0])[1]
     assert lo3 < hi3
-    with pytest.raises(ValueError, match="fractions"):
+    with refuses(ValueError, "fractions"):
         hashin_shtrikman_multiphase([0.5, 0.6], [0.18, 30.0])
 
 
@@ -93,10 +94,8 @@ def test_a_filler_like_conductivity_is_refused_with_the_range_and_no_unit_hint(t
     lo, hi = conductivity_range("Al2O3-60", PAPER)
     with pytest.raises(ValueError) as err:
         read_measurements(csv)
-    assert str(err.value) == (
-        f"k25.csv line 2: k_W_per_mK 25 W/(m K) is above {hi:.3g} W/(m K), the most Al2O3-60 "
-        "can conduct at any interface resistance (Hashin-Shtrikman bound at perfect "
-        f"interfaces); a sample of Al2O3-60 can conduct {lo:g} - {hi:.3g} W/(m K)")
+    msg = refused(err, "k25.csv line 2")
+    assert f"can conduct {lo:g} - {hi:.3g} W/(m K)" in msg
     assert "mW" not in str(err.value)
 
 

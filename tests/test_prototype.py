@@ -4,6 +4,7 @@ import json
 
 import numpy as np
 import pytest
+from refusals import refuses
 
 from itr_surrogate.prototype import LIBRARY, PrototypeRegressor
 
@@ -47,25 +48,25 @@ def test_json_round_trip_predicts_identically_and_holds_no_code(fitted, tmp_path
     again = PrototypeRegressor.load(path)
     np.testing.assert_array_equal(again.predict(Xt), fitted.predict(Xt))
     doc["model"]["terms"][0][1] = "__import__('os')"
-    with pytest.raises(ValueError, match="unknown shape"):
+    with refuses(ValueError, "text"):
         PrototypeRegressor.from_json(json.dumps(doc))
-    with pytest.raises(ValueError, match="not a PrototypeRegressor"):
+    with refuses(ValueError, "text"):
         PrototypeRegressor.from_json("[1, 2]")
 
 
-@pytest.mark.parametrize("call,match", [
-    (lambda m: m.fit(np.array([[1.0, np.nan]]), [1.0]), "X: holds NaN"),
-    (lambda m: m.fit(np.ones(3), np.ones(3)), "2-D"),
-    (lambda m: m.fit(np.ones((3, 2)), np.ones(2)), "y: expected 3"),
-    (lambda m: m.predict(np.ones((2, 2))), "not fitted"),
+@pytest.mark.parametrize("call,argument", [
+    (lambda m: m.fit(np.array([[1.0, np.nan]]), [1.0]), "X"),
+    (lambda m: m.fit(np.ones(3), np.ones(3)), "X"),
+    (lambda m: m.fit(np.ones((3, 2)), np.ones(2)), "y"),
+    (lambda m: m.predict(np.ones((2, 2))), "PrototypeRegressor"),
     (lambda m: PrototypeRegressor(n_best_per_feature=0).fit(np.ones((3, 1)), np.ones(3)),
      "n_best_per_feature"),
 ])
-def test_bad_input_names_the_argument(call, match):
-    with pytest.raises(ValueError, match=match):
+def test_bad_input_names_the_argument(call, argument):
+    with refuses(ValueError, argument):
         call(PrototypeRegressor())
 
 
 def test_predict_checks_the_feature_count(fitted):
-    with pytest.raises(ValueError, match="expected 2 features"):
+    with refuses(ValueError, "X"):
         fitted.predict(np.ones((4, 3)))

@@ -6,6 +6,7 @@ import warnings
 
 import numpy as np
 import pytest
+from refusals import refuses
 
 import itr_fv
 from itr_fv import Materials
@@ -113,7 +114,7 @@ def test_save_and_load_predict_identically_without_pickle(rb, tmp_path, monkeypa
 def test_a_file_holding_an_object_array_is_refused(tmp_path):
     path = tmp_path / "evil.npz"
     np.savez(path, meta=np.array([{"format": "itr-reduced-basis"}], dtype=object))
-    with pytest.raises(ValueError, match="not a reduced-basis file"):
+    with refuses(ValueError, "path"):
         ReducedBasis.load(path)
 
 
@@ -151,14 +152,14 @@ def test_bad_bounds_name_the_argument(problem, materials, bounds, match):
     ({"n_train": 2.5}, "n_train"),
 ])
 def test_bad_settings_name_the_argument(problem, materials, kwargs, match):
-    with pytest.raises(ValueError, match=match):
+    with refuses(ValueError, match):
         ReducedBasis(problem, materials, BOUNDS, **kwargs).fit()
 
 
 def test_contact_spots_are_refused(problem, materials):
     spotted = Materials({"silicone": 0.18, "Al2O3": 30.0}, {("Al2O3", "silicone"): 1e-7},
                         matrix="silicone", contact_conductance={("Al2O3", "Al2O3"): 1e-6})
-    with pytest.raises(ValueError, match="contact spots"):
+    with refuses(ValueError, "materials"):
         ReducedBasis(problem, spotted, BOUNDS).fit()
 
 
@@ -176,7 +177,7 @@ def test_bad_parameter_sets_name_the_parameter(rb, sets, match):
 
 
 def test_unfitted_model_says_so(problem, materials):
-    with pytest.raises(ValueError, match="not fitted"):
+    with refuses(ValueError, "ReducedBasis"):
         ReducedBasis(problem, materials, BOUNDS).predict({"k_Al2O3": 30.0})
 
 

@@ -3,6 +3,7 @@ retry policy), one material system read by every user of the paper's data."""
 
 import numpy as np
 import pytest
+from refusals import refuses
 
 import itr_fv.rve.generate as rve_module
 from itr_fv.materials import paper_data
@@ -25,10 +26,10 @@ def test_whole_number_of_voxels_is_accepted(box, voxel, n):
 
 
 @pytest.mark.parametrize("box, voxel, words", [
-    (10.0, 0.3, "33.3333 voxels"), (1.4, 0.2, "7 voxels"), (-1.0, 0.2, "box_um: expected"),
-    (1.0, float("nan"), "voxel_um: expected"), (True, 0.1, "box_um: expected")])
+    (10.0, 0.3, "box_um/voxel_um"), (1.4, 0.2, "box_um/voxel_um"), (-1.0, 0.2, "box_um"),
+    (1.0, float("nan"), "voxel_um"), (True, 0.1, "box_um")])
 def test_bad_box_or_voxel_is_refused_with_the_argument_named(box, voxel, words):
-    with pytest.raises(ValueError, match=words.replace("(", r"\(")):
+    with refuses(ValueError, words):
         RVESpec(box, voxel)
 
 
@@ -37,7 +38,7 @@ def test_other_fields_are_checked_by_name():
                          ({"min_gap_um": -0.1}, "min_gap_um"),
                          ({"tail_quantile": 0.1}, "tail_quantile"),
                          ({"seed": -1}, "seed"), ({"seed": 1.5}, "seed")]:
-        with pytest.raises(ValueError, match=name):
+        with refuses(ValueError, name):
             RVESpec(12.0, 0.25, **change)
     spec = RVESpec(12.0, 0.25, seed=4)
     assert RVESpec.from_dict(spec.to_dict()) == spec
@@ -118,7 +119,7 @@ def test_the_paper_material_system_is_read_once_by_every_user():
     assert MatrixConductivity().nominal == system.matrix_conductivity
     assert ForwardSettings().system is system
     assert system.describe() == "silicone 0.18, Al2O3 30, AlN 200 W/(m K)"
-    with pytest.raises(ValueError, match="filler: 'ZnO' is not in the material system"):
+    with refuses(ValueError, "filler"):
         system.filler("ZnO")
 
 
@@ -134,7 +135,7 @@ def test_film_and_psd_basis_are_stated_inputs_of_the_identification():
     assert fw.rve.contact_film_um == pytest.approx(0.002) and fw.rve.min_gap_um == 0.0
     assert fw.to_dict()["film_um"] == pytest.approx(0.002)
     assert fw.to_dict()["psd_basis"] == "volume"
-    with pytest.raises(ValueError, match="psd_basis"):
+    with refuses(ValueError, "psd_basis"):
         ForwardSettings(psd_basis="mass")
     # read as volume-weighted, Table 1's AlN is a powder of smaller particles (number median
     # smaller by exp(3 sigma^2) = 2.84): more of them in the same box, and the film holds
@@ -158,5 +159,5 @@ def test_cut_voxel_is_checked_and_kept_only_where_set():
     assert fine_cut.min_diameter_voxels == pytest.approx(1.6)   # 0.4 um in 0.25 um voxels
     assert RVESpec.from_dict(fine_cut.to_dict()) == fine_cut
     for bad in (0.0, -0.1, "0.2", True):
-        with pytest.raises(ValueError, match="cut_voxel_um"):
+        with refuses(ValueError, "cut_voxel_um"):
             spec.with_(cut_voxel_um=bad)

@@ -12,6 +12,7 @@ import warnings
 import numpy as np
 import pytest
 from conftest import sc_sphere
+from refusals import refuses
 
 from itr_fv import Materials, Microstructure, homogenize
 from itr_fv.checks import PhysicalScaleWarning
@@ -60,20 +61,20 @@ def test_large_voxels_without_interface_resistance_do_not_warn():
 # ---------------------------------------------------------------------- booleans, names
 @pytest.mark.parametrize("value", [True, False, np.bool_(True)])
 def test_booleans_are_not_conductivities_or_resistances(value):
-    with pytest.raises(ValueError, match=r"conductivity\['A'\].*boolean"):
+    with refuses(ValueError, "conductivity['A']"):
         Materials({"m": 1.0, "A": value}, matrix="m")
-    with pytest.raises(ValueError, match=r"resistance.*boolean"):
+    with refuses(ValueError, "resistance[('A', 'm')]"):
         Materials({"m": 1.0, "A": 2.0}, {("A", "m"): value}, matrix="m")
 
 
 @pytest.mark.parametrize("name", ["Al₂O₃", "sílice", "Al2O3_coated", "2phase", " A", ""])
 def test_phase_names_are_checked_before_any_work(name):
-    with pytest.raises(ValueError, match="conductivity: phase names"):
+    with refuses(ValueError, "conductivity"):
         Materials({"m": 1.0, name: 2.0}, matrix="m")
-    with pytest.raises(ValueError, match="materials: phase names"):
+    with refuses(ValueError, "materials"):
         Microstructure.from_spheres(np.full((1, 3), 0.5), np.array([0.2]), name, box_m=1.0,
                                     shape=8, matrix="m")
-    with pytest.raises(ValueError, match="names: phase names"):
+    with refuses(ValueError, "names"):
         Microstructure.from_labels(np.zeros((4, 4, 4), int), np.zeros((4, 4, 4), int),
                                    voxel_m=1e-6, names=(name,))
 

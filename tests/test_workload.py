@@ -11,6 +11,7 @@ import time
 from pathlib import Path
 
 import pytest
+from refusals import refuses
 
 from itr_fv.rve import FillerSpec, build_rve
 from itr_fv.rve.spec import RVESpec
@@ -167,7 +168,7 @@ def test_side_by_side_processes_each_count_in_the_peak_and_the_plan_says_so():
     two = Workload((g,), "fft", processes=2)
     assert two.peak_bytes() == 2 * alone.peak_bytes() + PROCESS_BASE_BYTES
     assert "in this process and 2 side processes" in two.summary()
-    with pytest.raises(ValueError, match="processes: expected a whole number >= 1"):
+    with refuses(ValueError, "processes"):
         Workload((g,), "fft", processes=0)
     comps = {"Al2O3-60": {"Al2O3": 0.6}, "AlN-60": {"AlN": 0.6}}
     both = identification_workload(ForwardSettings(), comps, ["area", "gap"], validation=True)
