@@ -116,14 +116,14 @@ def rve():
     import warnings
 
     from itr_fv import Materials
-    from itr_fv.rve import FillerSpec, generate_rve
+    from itr_fv.rve import FillerSpec, RVESpec, generate_rve
     from itr_surrogate.engine import RVEData
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)  # the box cut of the coarse tail
-        ms = generate_rve([FillerSpec("Al2O3", mu=1.02, sigma=0.35, volume_fraction=0.4)],
-                          box_um=4.0, voxel_um=0.25, seed=5, matrix="silicone",
-                          max_diameter_box_ratio=0.45)
+        ms = generate_rve(RVESpec(4.0, 0.25, max_diameter_box_ratio=0.45),
+                          [FillerSpec("Al2O3", mu=1.02, sigma=0.35, volume_fraction=0.4)], 5,
+                          matrix="silicone")
     return RVEData.of(ms), Materials({"silicone": 0.18, "Al2O3": 30.0},
                                      {("Al2O3", "silicone"): 2e-8}, matrix="silicone")
 

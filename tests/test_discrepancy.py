@@ -134,10 +134,10 @@ def repack(ms, seed, *, crowd=1.0, **packing):
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", UserWarning)   # the box cut, as in pack()
-                return generate_rve(specs, box_um=s.box_um, voxel_um=s.voxel_um,
-                                    seed=seed + 100 * attempt, matrix=ms.names[0],
-                                    max_diameter_box_ratio=s.max_diameter_box_ratio,
-                                    **packing), sum(phi.values())
+                return generate_rve(RVESpec(s.box_um, s.voxel_um, **packing,
+                                            max_diameter_box_ratio=s.max_diameter_box_ratio),
+                                    specs, seed + 100 * attempt,
+                                    matrix=ms.names[0]), sum(phi.values())
         except RuntimeError:
             if attempt == 5:
                 raise

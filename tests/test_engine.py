@@ -11,7 +11,7 @@ from refusals import refuses
 
 import itr_fft
 from itr_fv import Materials
-from itr_fv.rve import FillerSpec, generate_rve
+from itr_fv.rve import FillerSpec, RVESpec, generate_rve
 from itr_surrogate import engine as eng
 from itr_surrogate.engine import RVEData, SolveEngine, SolveRequest, SolveStore
 
@@ -25,9 +25,9 @@ def rves():
     for seed in (1, 2):
         # a 5 um box on purpose (small solves): the box cut is expected and said
         with pytest.warns(UserWarning, match="under-represents its coarse particles"):
-            ms = generate_rve([FillerSpec("Al2O3", mu=1.02, sigma=0.35, volume_fraction=0.5)],
-                              box_um=5.0, voxel_um=0.25, seed=seed, matrix="silicone",
-                              max_diameter_box_ratio=0.45)
+            ms = generate_rve(RVESpec(5.0, 0.25, max_diameter_box_ratio=0.45),
+                              [FillerSpec("Al2O3", mu=1.02, sigma=0.35, volume_fraction=0.5)],
+                              seed, matrix="silicone")
         out.append((ms, RVEData.of(ms)))
     return out
 

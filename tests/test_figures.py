@@ -234,12 +234,12 @@ def test_size_cut_is_the_cut_generate_rve_draws_with():
     generator cuts with: its report gives the same range and shares."""
     import warnings
 
-    from itr_fv.rve import generate_rve
+    from itr_fv.rve import generate_rve_with_report
     spec = FillerSpec.from_table1("AlN", 0.3)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        _, rep = generate_rve(spec, 12.0, 0.25, seed=0, max_diameter_box_ratio=0.45,
-                              return_report=True)
+        _, rep = generate_rve_with_report(RVESpec(12.0, 0.25, max_diameter_box_ratio=0.45),
+                                          spec, 0)
     f, = rep.fillers
     cut = size_cut(spec, 12.0, 0.25, max_diameter_box_ratio=0.45)
     assert (f.d_lo_um, f.d_hi_um) == (cut.d_lo_um, cut.d_hi_um)
@@ -266,7 +266,8 @@ def test_rve_render_labels_its_three_axes_in_micrometres(tmp_path, monkeypatch):
     monkeypatch.setattr(pv.Plotter, "show_bounds", spy)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)
-        ms = generate_rve(FillerSpec.from_table1("Al2O3", 0.3), 8.0, 0.25, seed=0)
+        ms = generate_rve(RVESpec(8.0, 0.25, max_diameter_box_ratio=1 / 3),
+                          FillerSpec.from_table1("Al2O3", 0.3), 0)
     out = render_particles(ms, str(tmp_path / "rve.png"), window_size=(300, 300),
                            resolution=6)
     assert open(out, "rb").read(8) == b"\x89PNG\r\n\x1a\n"

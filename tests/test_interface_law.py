@@ -24,7 +24,7 @@ from itr_fv.discrete.interface_law import (
 )
 from itr_fv.discrete.problem import DiscreteProblem
 from itr_fv.materials.parameters import KINDS
-from itr_fv.rve import FillerSpec, generate_rve
+from itr_fv.rve import FillerSpec, RVESpec, generate_rve
 from validation.gallery import touching_array
 
 A = 1.0e-6
@@ -194,7 +194,8 @@ def test_the_reduced_basis_decomposes_the_segment_law():
     spec = FillerSpec("Al2O3", mu=1.02, sigma=0.35, volume_fraction=0.40)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)
-        ms = generate_rve(spec, box_um=6.0, voxel_um=0.25, seed=3, matrix="silicone")
+        ms = generate_rve(RVESpec(6.0, 0.25, max_diameter_box_ratio=1 / 3), spec, 3,
+                          matrix="silicone")
     mat = gap_materials(rb=1e-7)
     problem = DiscreteProblem(ms, contact="gap", interface="segment")
     box = ParameterBox({"k_Al2O3": (20.0, 40.0), "R_Al2O3_silicone": (1e-8, 5e-5)}, mat)

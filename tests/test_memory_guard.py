@@ -96,10 +96,9 @@ def test_estimate_bounds_the_measured_peak(solver, n):
         import json, resource
         import numpy as np
         from itr_fv import Materials
-        from itr_fv.rve import FillerSpec, generate_rve
-        ms = generate_rve([FillerSpec("Al2O3", mu=1.02, sigma=0.35, volume_fraction=0.6)],
-                          box_um={n} * 0.125, voxel_um=0.125, seed=1,
-                          max_diameter_box_ratio=0.45)
+        from itr_fv.rve import FillerSpec, RVESpec, generate_rve
+        ms = generate_rve(RVESpec({n} * 0.125, 0.125, max_diameter_box_ratio=0.45),
+                          [FillerSpec("Al2O3", mu=1.02, sigma=0.35, volume_fraction=0.6)], 1)
         mat = Materials({{"silicone": 0.18, "Al2O3": 30.0}},
                         {{("Al2O3", "silicone"): 1e-7, ("Al2O3", "Al2O3"): 1e-7}}, "silicone")
         before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024

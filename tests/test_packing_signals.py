@@ -26,7 +26,7 @@ import pytest
 from itr_fv.discrete import _geometry_kernels as K
 from itr_fv.discrete import cut_cells
 from itr_fv.discrete.face_geometry import face_geometry
-from itr_fv.rve import FillerSpec, generate_rve
+from itr_fv.rve import FillerSpec, RVESpec, generate_rve
 from itr_fv.rve import generate as gen
 from itr_fv.rve import microstructure as micro
 from itr_fv.rve import packing as P
@@ -170,10 +170,11 @@ def test_label_counts_are_those_of_bincount(minlength, monkeypatch):
 def test_generate_rve_bars_are_quiet_when_fast_and_can_be_switched_off(capsys):
     spec = FillerSpec.from_table1("Al2O3", 0.4)
     with pytest.warns(UserWarning, match="box limits diameters"):
-        a = generate_rve([spec], box_um=12, voxel_um=0.5, seed=3)
+        a = generate_rve(RVESpec(12, 0.5, max_diameter_box_ratio=1 / 3), [spec], 3)
     assert capsys.readouterr().err == ""  # faster than PROGRESS_DELAY_S: no bar
     with pytest.warns(UserWarning, match="box limits diameters"):
-        b = generate_rve([spec], box_um=12, voxel_um=0.5, seed=3, progress=False)
+        b = generate_rve(RVESpec(12, 0.5, max_diameter_box_ratio=1 / 3), [spec], 3,
+                         progress=False)
     assert np.array_equal(a.particle_ids, b.particle_ids)
 
 
@@ -193,9 +194,8 @@ def test_stage_bar_shows_after_its_delay(monkeypatch, capsys):
 def small_rve():
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)  # the 12 um box cuts the coarse tail
-        return generate_rve([FillerSpec.from_table1("Al2O3", 0.5)], box_um=12,
-                            voxel_um=0.25, seed=3, max_diameter_box_ratio=0.4,
-                            progress=False)
+        return generate_rve(RVESpec(12, 0.25, max_diameter_box_ratio=0.4),
+                            [FillerSpec.from_table1("Al2O3", 0.5)], 3, progress=False)
 
 
 def geometry_digest(g) -> str:

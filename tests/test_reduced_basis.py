@@ -11,7 +11,7 @@ from refusals import refuses
 import itr_fv
 from itr_fv import Materials
 from itr_fv.discrete.problem import DiscreteProblem
-from itr_fv.rve import FillerSpec, generate_rve
+from itr_fv.rve import FillerSpec, RVESpec, generate_rve
 from itr_surrogate.face_decomposition import ParameterBox, ResistanceDecomposition
 from itr_surrogate.reduced_basis import ReducedBasis, _divergence, _project_divergence_free
 
@@ -24,7 +24,8 @@ def problem():
     spec = FillerSpec("Al2O3", mu=1.02, sigma=0.35, volume_fraction=0.40)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)  # the box cuts the PSD's tail
-        ms = generate_rve(spec, box_um=6.0, voxel_um=0.25, seed=3, matrix="silicone")
+        ms = generate_rve(RVESpec(6.0, 0.25, max_diameter_box_ratio=1 / 3), spec, 3,
+                          matrix="silicone")
     return DiscreteProblem(ms, contact="gap")
 
 

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from scipy.spatial import cKDTree
 
-from itr_fv.rve import FillerSpec, generate_rve, packing_limit
+from itr_fv.rve import FillerSpec, RVESpec, generate_rve, generate_rve_with_report, packing_limit
 from itr_fv.rve.packing import check_overlaps, pack_spheres, pairs_within_gap
 
 # small distributions so that small boxes are representative (default runs stay fast)
@@ -30,8 +30,8 @@ def _table_um(ms):
 
 
 def test_single_filler_dense_no_overlap():
-    ms, rep = generate_rve(FillerSpec("Al2O3", volume_fraction=0.62, **SMALL), box_um=10.0,
-                           voxel_um=0.125, seed=3, return_report=True)
+    ms, rep = generate_rve_with_report(RVESpec(10.0, 0.125, max_diameter_box_ratio=1 / 3),
+                                       FillerSpec("Al2O3", volume_fraction=0.62, **SMALL), 3)
     c, r, L = _table_um(ms)
     n_bad, gap = _overlaps_kdtree(c, r, L)
     assert n_bad == 0 and rep.n_overlaps == 0
@@ -52,8 +52,8 @@ def test_single_filler_dense_no_overlap():
 
 
 def test_table1_al2o3_in_30um_box():
-    ms, rep = generate_rve([FillerSpec.from_table1("Al2O3", 0.60)], box_um=30.0,
-                           voxel_um=0.3125, seed=1, return_report=True)
+    ms, rep = generate_rve_with_report(RVESpec(30.0, 0.3125, max_diameter_box_ratio=1 / 3),
+                                       [FillerSpec.from_table1("Al2O3", 0.60)], 1)
     f = rep.fillers[0]
     assert rep.n_overlaps == 0
     c, r, L = _table_um(ms)
@@ -69,7 +69,7 @@ def test_table1_al2o3_in_30um_box():
 def test_hybrid_fractions_per_filler():
     specs = [FillerSpec("Al2O3", volume_fraction=0.32, **SMALL),
              FillerSpec("AlN", volume_fraction=0.32, **SMALL_WIDE)]
-    ms, rep = generate_rve(specs, box_um=12.0, voxel_um=0.125, seed=5, return_report=True)
+    ms, rep = generate_rve_with_report(RVESpec(12.0, 0.125, max_diameter_box_ratio=1 / 3), specs, 5)
     assert not rep.warnings
     c, r, L = _table_um(ms)
     assert _overlaps_kdtree(c, r, L)[0] == 0
@@ -91,9 +91,9 @@ def test_hybrid_fractions_per_filler():
 
 def test_same_seed_same_table_and_different_seeds_differ():
     spec = FillerSpec("Al2O3", volume_fraction=0.55, **SMALL)
-    a = generate_rve(spec, 8.0, 0.125, seed=11)
-    b = generate_rve(spec, 8.0, 0.125, seed=11)
-    c = generate_rve(spec, 8.0, 0.125, seed=12)
+    a = generate_rve(RVESpec(8.0, 0.125, max_diameter_box_ratio=1 / 3), spec, 11)
+    b = generate_rve(RVESpec(8.0, 0.125, max_diameter_box_ratio=1 / 3), spec, 11)
+    c = generate_rve(RVESpec(8.0, 0.125, max_diameter_box_ratio=1 / 3), spec, 12)
     assert a.particles.centers_m.tobytes() == b.particles.centers_m.tobytes()
     assert a.particles.radii_m.tobytes() == b.particles.radii_m.tobytes()
     assert np.array_equal(a.particle_ids, b.particle_ids)
@@ -104,8 +104,9 @@ def test_same_seed_same_table_and_different_seeds_differ():
 
 def test_min_gap_respected():
     gap = 0.05
-    ms, rep = generate_rve(FillerSpec("Al2O3", volume_fraction=0.5, **SMALL), 8.0, 0.125,
-                           seed=2, min_gap_um=gap, return_report=True)
+    ms, rep = generate_rve_with_report(
+        RVESpec(8.0, 0.125, min_gap_um=gap, max_diameter_box_ratio=1 / 3),
+        FillerSpec("Al2O3", volume_fraction=0.5, **SMALL), 2)
     c, r, L = _table_um(ms)
     n_bad, g = _overlaps_kdtree(c, r, L, min_gap=gap)
     assert n_bad == 0 and g.min() >= gap
@@ -117,8 +118,8 @@ def test_min_gap_respected():
 
 
 def test_gap_distribution_without_a_film_shows_the_packers_nanometre_gaps():
-    ms, rep = generate_rve(FillerSpec("Al2O3", volume_fraction=0.5, **SMALL), 8.0, 0.125,
-                           seed=2, return_report=True)
+    ms, rep = generate_rve_with_report(RVESpec(8.0, 0.125, max_diameter_box_ratio=1 / 3),
+                                       FillerSpec("Al2O3", volume_fraction=0.5, **SMALL), 2)
     c, r, L = _table_um(ms)
     _, g = _overlaps_kdtree(c, r, L)
     counts = list(rep.gap_counts.values())
@@ -129,8 +130,8 @@ def test_gap_distribution_without_a_film_shows_the_packers_nanometre_gaps():
 
 def test_alN_box_cut_warns_and_reports_truncation():
     with pytest.warns(UserWarning, match="removes"):
-        ms, rep = generate_rve(FillerSpec.from_table1("AlN", 0.30), box_um=18.0,
-                               voxel_um=0.5, seed=0, return_report=True)
+        ms, rep = generate_rve_with_report(RVESpec(18.0, 0.5, max_diameter_box_ratio=1 / 3),
+                                           FillerSpec.from_table1("AlN", 0.30), 0)
     f = rep.fillers[0]
     assert f.d_hi_um == pytest.approx(6.0) and f.d_max_drawn_um <= 6.0 + 1e-9
     assert f.cut_volume_high > 0.5 and rep.warnings
@@ -189,54 +190,64 @@ def test_fillerspec_validation():
 def test_generate_rve_bad_input():
     ok = FillerSpec("Al2O3", volume_fraction=0.3, **SMALL)
     with pytest.raises(ValueError, match="box_um"):
-        generate_rve(ok, 0.0, 0.1, seed=0)
+        RVESpec(0.0, 0.1)
     with pytest.raises(ValueError, match="box_um"):
-        generate_rve(ok, -8.0, 0.1, seed=0)
+        RVESpec(-8.0, 0.1)
     with pytest.raises(ValueError, match="voxel_um"):
-        generate_rve(ok, 8.0, 0.0, seed=0)
+        RVESpec(8.0, 0.0)
     with pytest.raises(ValueError, match="voxel_um"):
-        generate_rve(ok, 8.0, 0.3, seed=0)  # 8 / 0.3 not an integer
+        RVESpec(8.0, 0.3)  # 8 / 0.3 not an integer
     # voxel larger than the particles that matter (D ~ 1 um, 2-voxel minimum = 1 um)
     with pytest.raises(ValueError, match="voxel_um"):
-        generate_rve(ok, 8.0, 0.5, seed=0)
+        generate_rve(RVESpec(8.0, 0.5, max_diameter_box_ratio=1 / 3), ok, 0)
     with pytest.raises(ValueError, match="voxel_um"):
-        generate_rve(FillerSpec.from_table1("Al2O3", 0.5), 40.0, 2.0, seed=0)
+        generate_rve(RVESpec(40.0, 2.0, max_diameter_box_ratio=1 / 3),
+                     FillerSpec.from_table1("Al2O3", 0.5), 0)
     with pytest.raises(ValueError, match="min_gap_um"):
-        generate_rve(ok, 8.0, 0.125, seed=0, min_gap_um=-0.1)
+        RVESpec(8.0, 0.125, min_gap_um=-0.1)
     with pytest.raises(ValueError, match="seed"):
-        generate_rve(ok, 8.0, 0.125, seed=-1)
-    with pytest.raises(ValueError, match="specs"):
-        generate_rve([], 8.0, 0.125, seed=0)
+        generate_rve(RVESpec(8.0, 0.125), ok, -1)
+    with pytest.raises(ValueError, match="sampling"):
+        RVESpec(8.0, 0.125, sampling="sobol")
+    with pytest.raises(ValueError, match="max_sweeps"):
+        RVESpec(8.0, 0.125, max_sweeps=0)
+    with pytest.raises(ValueError, match="spec"):
+        generate_rve(ok, RVESpec(8.0, 0.125), 0)
+    with pytest.raises(ValueError, match="fillers"):
+        generate_rve(RVESpec(8.0, 0.125), [], 0)
     # unknown material
     with pytest.raises(ValueError, match="unknown material"):
-        generate_rve(FillerSpec("BN", volume_fraction=0.3, **SMALL), 8.0, 0.125, seed=0,
+        generate_rve(RVESpec(8.0, 0.125), FillerSpec("BN", volume_fraction=0.3, **SMALL), 0,
                      materials={"silicone", "Al2O3"})
     with pytest.raises(ValueError, match="matrix"):
-        generate_rve(ok, 8.0, 0.125, seed=0, matrix="epoxy", materials={"silicone", "Al2O3"})
-    with pytest.raises(ValueError, match="specs"):
-        generate_rve(FillerSpec("silicone", volume_fraction=0.3, **SMALL), 8.0, 0.125, seed=0)
+        generate_rve(RVESpec(8.0, 0.125), ok, 0, matrix="epoxy", materials={"silicone", "Al2O3"})
+    with pytest.raises(ValueError, match="fillers"):
+        generate_rve(RVESpec(8.0, 0.125), FillerSpec("silicone", volume_fraction=0.3, **SMALL), 0)
     # box too small for an explicit largest particle
     with pytest.raises(ValueError, match="box_um"):
-        generate_rve(FillerSpec("Al2O3", volume_fraction=0.3, d_max_um=4.0, **SMALL), 8.0,
-                     0.125, seed=0)
+        generate_rve(RVESpec(8.0, 0.125, max_diameter_box_ratio=1 / 3),
+                     FillerSpec("Al2O3", volume_fraction=0.3, d_max_um=4.0, **SMALL), 0)
 
 
 def test_beyond_jamming_limit_states_estimate():
-    with pytest.raises(ValueError, match=r"specs: .*0\.69 exceeds .*limit 0\.6[78]"):
-        generate_rve(FillerSpec.from_table1("Al2O3", 0.69), 40.0, 0.3125, seed=0)
-    with pytest.raises(ValueError, match="specs"), pytest.warns(UserWarning, match="AlN"):
-        generate_rve([FillerSpec.from_table1("Al2O3", 0.40),
-                      FillerSpec.from_table1("AlN", 0.35)], 40.0, 0.3125, seed=0)
-    with pytest.raises(ValueError, match="specs"):
-        generate_rve([FillerSpec("A", volume_fraction=0.6, **SMALL),
-                      FillerSpec("B", volume_fraction=0.5, **SMALL)], 8.0, 0.125, seed=0)
+    with pytest.raises(ValueError, match=r"fillers: .*0\.69 exceeds .*limit 0\.6[78]"):
+        generate_rve(RVESpec(40.0, 0.3125, max_diameter_box_ratio=1 / 3),
+                     FillerSpec.from_table1("Al2O3", 0.69), 0)
+    with pytest.raises(ValueError, match="fillers"), pytest.warns(UserWarning, match="AlN"):
+        generate_rve(RVESpec(40.0, 0.3125, max_diameter_box_ratio=1 / 3),
+                     [FillerSpec.from_table1("Al2O3", 0.40), FillerSpec.from_table1("AlN", 0.35)],
+                     0)
+    with pytest.raises(ValueError, match="fillers"):
+        generate_rve(RVESpec(8.0, 0.125, max_diameter_box_ratio=1 / 3),
+                     [FillerSpec("A", volume_fraction=0.6, **SMALL),
+                      FillerSpec("B", volume_fraction=0.5, **SMALL)], 0)
 
 
 def test_render_particles(tmp_path):
     from itr_fv.output.particle_render import render_particles
-    ms = generate_rve([FillerSpec("Al2O3", volume_fraction=0.3, **SMALL),
-                       FillerSpec("AlN", volume_fraction=0.2, **SMALL_WIDE)], 12.0, 0.125,
-                      seed=1)
+    ms = generate_rve(RVESpec(12.0, 0.125, max_diameter_box_ratio=1 / 3),
+                      [FillerSpec("Al2O3", volume_fraction=0.3, **SMALL),
+                       FillerSpec("AlN", volume_fraction=0.2, **SMALL_WIDE)], 1)
     out = render_particles(ms, str(tmp_path / "fig4.png"), window_size=(300, 300),
                            resolution=8)
     data = open(out, "rb").read()
@@ -259,7 +270,8 @@ def test_acceptance_40um(name, fill):
     specs = [FillerSpec.from_table1(m, f) for m, f in fill]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)  # AlN box cut, reported
-        ms, rep = generate_rve(specs, box_um=40.0, voxel_um=0.3125, seed=1, return_report=True)
+        ms, rep = generate_rve_with_report(RVESpec(40.0, 0.3125, max_diameter_box_ratio=1 / 3),
+                                           specs, 1)
     c, r, L = _table_um(ms)
     assert _overlaps_kdtree(c, r, L)[0] == 0 and rep.n_overlaps == 0
     for f in rep.fillers:
@@ -267,7 +279,7 @@ def test_acceptance_40um(name, fill):
         assert abs(f.voxel_fraction - f.target_fraction) < 0.01
         assert abs(f.mu_fit - f.mu_target) < 0.05
         assert abs(f.sigma_fit - f.sigma_target) < 0.05
-    again = generate_rve(specs, box_um=40.0, voxel_um=0.3125, seed=1) if name == "Al2O3-65" \
-        else None
+    again = generate_rve(RVESpec(40.0, 0.3125, max_diameter_box_ratio=1 / 3), specs, 1) \
+        if name == "Al2O3-65" else None
     if again is not None:
         assert again.particles.centers_m.tobytes() == ms.particles.centers_m.tobytes()

@@ -55,8 +55,8 @@ def test_build_rve_packs_replica_r_with_seed_plus_r():
     filler = [FillerSpec.from_table1("Al2O3", 0.3)]
     ms, seed = build_rve(spec, filler, 2)
     assert seed == 9
-    ref = generate_rve(filler, box_um=6.0, voxel_um=0.25, seed=9,
-                       max_diameter_box_ratio=spec.max_diameter_box_ratio)
+    ref = generate_rve(RVESpec(6.0, 0.25, max_diameter_box_ratio=spec.max_diameter_box_ratio),
+                       filler, 9)
     np.testing.assert_array_equal(ms.particles.centers_m, ref.particles.centers_m)
     np.testing.assert_array_equal(ms.material_ids, ref.material_ids)
 

@@ -56,12 +56,13 @@ def test_the_engine_counts_a_side_processes_solves_as_this_runs(tmp_path):
     them, and a later request for one repeats a solve of this run, not an earlier run's."""
     from itr_fv.materials import Materials
     from itr_fv.rve.generate import FillerSpec, generate_rve
+    from itr_fv.rve.spec import RVESpec
     from itr_surrogate.engine import RVEData, SolveEngine, SolveRequest
 
     with pytest.warns(UserWarning, match="under-represents its coarse particles"):
-        ms = generate_rve([FillerSpec("Al2O3", mu=1.02, sigma=0.35, volume_fraction=0.5)],
-                          box_um=5.0, voxel_um=0.25, seed=7, matrix="silicone",
-                          max_diameter_box_ratio=0.45, progress=False)
+        ms = generate_rve(RVESpec(5.0, 0.25, max_diameter_box_ratio=0.45),
+                          [FillerSpec("Al2O3", mu=1.02, sigma=0.35, volume_fraction=0.5)], 7,
+                          matrix="silicone", progress=False)
     mat = Materials({"Al2O3": 30.0, "silicone": 0.18}, {("Al2O3", "silicone"): 1e-8},
                     matrix="silicone")
     req = SolveRequest.for_materials(RVEData.of(ms), mat, 1e-9)

@@ -9,7 +9,7 @@ from refusals import refuses
 import itr_fft
 from itr_fv import Materials, homogenize
 from itr_fv.discrete.model import apply_operator, face_geometry
-from itr_fv.rve import FillerSpec, generate_rve
+from itr_fv.rve import FillerSpec, RVESpec, generate_rve
 from itr_fv.solvers.warm_start import galerkin_start
 
 
@@ -17,8 +17,8 @@ from itr_fv.solvers.warm_start import galerkin_start
 def dense():
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)
-        ms = generate_rve([FillerSpec("Al2O3", mu=1.02, sigma=0.35, volume_fraction=0.6)],
-                          box_um=32 * 0.3125, voxel_um=0.3125, seed=3)
+        ms = generate_rve(RVESpec(32 * 0.3125, 0.3125, max_diameter_box_ratio=1 / 3),
+                          [FillerSpec("Al2O3", mu=1.02, sigma=0.35, volume_fraction=0.6)], 3)
     return ms, face_geometry(ms)
 
 

@@ -35,13 +35,12 @@ BOX, VOXEL, TOL = 16.0, 0.16, 1e-6
 
 
 def rve(seed: int = 1):
-    from itr_fv.rve import FillerSpec, generate_rve
+    from itr_fv.rve import FillerSpec, RVESpec, generate_rve
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        return generate_rve([FillerSpec.from_table1("Al2O3", 0.60)], box_um=BOX,
-                            voxel_um=VOXEL, seed=seed, matrix="silicone",
-                            max_diameter_box_ratio=0.45)
+        return generate_rve(RVESpec(BOX, VOXEL, max_diameter_box_ratio=0.45),
+                            [FillerSpec.from_table1("Al2O3", 0.60)], seed, matrix="silicone")
 
 
 def materials(r: float):

@@ -29,11 +29,12 @@ def one_case(n: int, R: float, amg: str) -> dict:
     import numpy as np
 
     from itr_fv import Materials, homogenize
-    from itr_fv.rve import FillerSpec, generate_rve
+    from itr_fv.rve import FillerSpec, RVESpec, generate_rve
 
     t0 = time.perf_counter()
-    ms = generate_rve([FillerSpec("Al2O3", mu=1.02, sigma=0.35, volume_fraction=0.55)],
-                      box_um=0.3125 * n, voxel_um=0.3125, seed=7, matrix="silicone")
+    ms = generate_rve(RVESpec(0.3125 * n, 0.3125, max_diameter_box_ratio=1 / 3),
+                      [FillerSpec("Al2O3", mu=1.02, sigma=0.35, volume_fraction=0.55)], 7,
+                      matrix="silicone")
     t_rve = time.perf_counter() - t0
     mat = Materials({"silicone": 0.18, "Al2O3": 30.0},
                     {("Al2O3", "silicone"): R, ("Al2O3", "Al2O3"): R}, matrix="silicone",

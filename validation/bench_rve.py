@@ -52,12 +52,13 @@ def main() -> None:
     os.environ.setdefault("NUMBA_NUM_THREADS", str(args.threads))
     import numba
 
-    from itr_fv.rve import FillerSpec, generate_rve
+    from itr_fv.rve import FillerSpec, RVESpec, generate_rve, generate_rve_with_report
 
     numba.set_num_threads(min(args.threads, numba.config.NUMBA_NUM_THREADS))
     # warm-up: numba compile (cache=True: only the first run on a machine pays)
     t0 = time.perf_counter()
-    generate_rve(FillerSpec("Al2O3", 0.0, 0.3, 0.5), 10.0, 0.125, seed=0)
+    generate_rve(RVESpec(10.0, 0.125, max_diameter_box_ratio=1 / 3),
+                 FillerSpec("Al2O3", 0.0, 0.3, 0.5), 0)
     t_warm = time.perf_counter() - t0
 
     rows = []
@@ -75,8 +76,9 @@ def main() -> None:
         with warnings.catch_warnings(record=True):
             warnings.simplefilter("always")
             t = time.perf_counter()
-            ms, rep = generate_rve(specs, args.box, args.voxel, seed=args.seed,
-                                   sampling=args.sampling, return_report=True)
+            ms, rep = generate_rve_with_report(
+                RVESpec(args.box, args.voxel, max_diameter_box_ratio=1 / 3,
+                        sampling=args.sampling), specs, args.seed)
             wall = time.perf_counter() - t
         c = ms.particles.centers_m * 1e6
         r = ms.particles.radii_m * 1e6

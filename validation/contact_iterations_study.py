@@ -61,14 +61,14 @@ def problem(voxel_um: float, film_nm: float | None):
     ``film_nm`` (None: the package's default)."""
     from itr_fv import Microstructure
     from itr_fv.discrete.problem import DiscreteProblem
-    from itr_fv.rve import FillerSpec, generate_rve
+    from itr_fv.rve import FillerSpec, RVESpec, generate_rve
     from validation.resolution_study import BOX_UM, materials
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)
         spec = FillerSpec("AlN", mu=1.25, sigma=0.59, volume_fraction=0.60)
-        ms0 = generate_rve([spec], box_um=BOX_UM, voxel_um=0.4, seed=1, matrix="silicone",
-                           max_diameter_box_ratio=0.45)
+        ms0 = generate_rve(RVESpec(BOX_UM, 0.4, max_diameter_box_ratio=0.45), [spec], 1,
+                           matrix="silicone")
     t = ms0.particles
     contact = t.contact if film_nm is None else dataclasses.replace(t.contact,
                                                                      film_m=film_nm * 1e-9)

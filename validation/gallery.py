@@ -179,7 +179,7 @@ def _particles(fillers: tuple[tuple[str, float], ...], box_um: float, seed: int,
     """
     if dense:
         try:
-            from itr_fv.rve import FillerSpec, generate_rve
+            from itr_fv.rve import FillerSpec, RVESpec, generate_rve
         except ImportError:
             generate_rve = None
         if generate_rve is not None:
@@ -187,8 +187,8 @@ def _particles(fillers: tuple[tuple[str, float], ...], box_um: float, seed: int,
                      for f, v in fillers]
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", UserWarning)  # box-size truncation notice
-                ms = generate_rve(specs, box_um=box_um, voxel_um=box_um / 64, seed=seed,
-                                  max_iter=2_000_000)
+                ms = generate_rve(RVESpec(box_um, box_um / 64, max_diameter_box_ratio=1 / 3,
+                                          max_sweeps=2_000_000), specs, seed)
             t = ms.particles
             return (t.centers_m / UM, t.radii_m / UM, tuple(str(m) for m in t.material))
     rng = np.random.default_rng(seed)

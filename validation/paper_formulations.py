@@ -68,7 +68,7 @@ def solve(name: str, fractions: dict, seed: int, voxel_um: float) -> dict:
     import itr_fft
     from itr_fv import Materials
     from itr_fv.materials import paper_data
-    from itr_fv.rve import FillerSpec, generate_rve
+    from itr_fv.rve import FillerSpec, RVESpec, generate_rve
 
     psd = paper_data.psd_lognormal()
     table5 = paper_data.paper_resistances()
@@ -77,8 +77,8 @@ def solve(name: str, fractions: dict, seed: int, voxel_um: float) -> dict:
              for f, v in fractions.items()]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # the box cut of AlN is reported in box_size.md
-        ms = generate_rve(specs, box_um=box, voxel_um=voxel_um, seed=seed, matrix="silicone",
-                          max_diameter_box_ratio=0.45)
+        ms = generate_rve(RVESpec(box, voxel_um, max_diameter_box_ratio=0.45), specs, seed,
+                          matrix="silicone")
     mat = Materials({p: paper_data.PAPER_CONDUCTIVITY[p] for p in ("silicone", *fractions)},
                     {(f, "silicone"): table5[(f, "silicone")] for f in fractions},
                     matrix="silicone", contact="gap")

@@ -28,7 +28,7 @@ sys.path.insert(0, str(ROOT))
 import itr_fft  # noqa: E402
 from itr_fv import Materials  # noqa: E402
 from itr_fv.discrete.problem import DiscreteProblem  # noqa: E402
-from itr_fv.rve import FillerSpec, generate_rve  # noqa: E402
+from itr_fv.rve import FillerSpec, RVESpec, generate_rve  # noqa: E402
 from itr_surrogate.face_decomposition import ParameterBox  # noqa: E402
 from itr_surrogate.reduced_basis import ReducedBasis  # noqa: E402
 
@@ -40,8 +40,9 @@ HELD_OUT = 30
 def main() -> None:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)
-        ms = generate_rve(FillerSpec("Al2O3", mu=1.02, sigma=0.35, volume_fraction=0.60),
-                          box_um=12.0, voxel_um=0.25, seed=5, matrix="silicone")
+        ms = generate_rve(RVESpec(12.0, 0.25, max_diameter_box_ratio=1 / 3),
+                          FillerSpec("Al2O3", mu=1.02, sigma=0.35, volume_fraction=0.60), 5,
+                          matrix="silicone")
     mat = Materials({"silicone": 0.18, "Al2O3": 30.0}, {("Al2O3", "silicone"): 1e-7},
                     "silicone", contact="gap")
     box = ParameterBox(BOUNDS, mat)

@@ -66,14 +66,13 @@ _PARTICLES: dict = {}
 def particles(seed: int):
     """(centres um, radii um, materials, report) of the seed's RVE (cached)."""
     if seed not in _PARTICLES:
-        from itr_fv.rve import FillerSpec, generate_rve
+        from itr_fv.rve import FillerSpec, RVESpec, generate_rve_with_report
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", UserWarning)  # box-size truncation notice
-            ms, rep = generate_rve([FillerSpec("Al2O3", mu=1.02, sigma=0.35,
-                                               volume_fraction=PHI)],
-                                   box_um=BOX_UM, voxel_um=max(VOXELS_UM), seed=seed,
-                                   max_diameter_box_ratio=BOX_RATIO, max_iter=2_000_000,
-                                   return_report=True)
+            ms, rep = generate_rve_with_report(
+                RVESpec(BOX_UM, max(VOXELS_UM), max_diameter_box_ratio=BOX_RATIO,
+                        max_sweeps=2_000_000),
+                [FillerSpec("Al2O3", mu=1.02, sigma=0.35, volume_fraction=PHI)], seed)
         t = ms.particles
         _PARTICLES[seed] = (t.centers_m, t.radii_m, [str(m) for m in t.material], rep)
     return _PARTICLES[seed]

@@ -82,15 +82,15 @@ def solve(model: str, seed: int, h: float) -> dict:
     from itr_fv import Microstructure
     from itr_fv.checks import VoxelContactWarning
     from itr_fv.discrete.problem import DiscreteProblem
-    from itr_fv.rve import FillerSpec, generate_rve
+    from itr_fv.rve import FillerSpec, RVESpec, generate_rve
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)
         spec = (FillerSpec("AlN", mu=1.25, sigma=0.59, volume_fraction=0.60)
                 if filler(model) == "AlN" else
                 FillerSpec("Al2O3", mu=1.02, sigma=0.35, volume_fraction=0.60))
-        ms0 = generate_rve([spec], box_um=BOX_UM, voxel_um=0.4, seed=seed, matrix="silicone",
-                           max_diameter_box_ratio=0.45)
+        ms0 = generate_rve(RVESpec(BOX_UM, 0.4, max_diameter_box_ratio=0.45), [spec], seed,
+                           matrix="silicone")
     t = ms0.particles
     n = int(round(BOX_UM / h))
     ms = Microstructure.from_spheres(t.centers_m, t.radii_m, t.material, box_m=BOX_UM * 1e-6,

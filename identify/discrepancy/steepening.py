@@ -131,15 +131,12 @@ class Repacker:
         if unknown:
             raise ValueError(f"{unknown[0]}: not a change a repacking knows (RVESpec "
                              f"fields, fractions, median_scale)")
-        spec = self.spec.with_(**rve_changes)
+        # the repacking's contacts meet at its min_gap_um, not the base's film_um
+        spec = self.spec.with_(**{"film_um": None, **rve_changes})
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", UserWarning)   # the box cut: in the report
-            return generate_rve(self.fillers(fractions, median_scale), box_um=spec.box_um,
-                                voxel_um=spec.voxel_um, seed=spec.seed,
-                                min_gap_um=spec.min_gap_um, matrix=self.matrix,
-                                tail_quantile=spec.tail_quantile,
-                                max_diameter_box_ratio=spec.max_diameter_box_ratio,
-                                min_diameter_voxels=spec.min_diameter_voxels)
+            return generate_rve(spec, self.fillers(fractions, median_scale), spec.seed,
+                                matrix=self.matrix)
 
 
 def filler_fractions(ms: Microstructure) -> dict[str, float]:

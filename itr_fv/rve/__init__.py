@@ -3,11 +3,17 @@ packings of polydisperse spheres, and their voxel images with particle ids.
 
 Public API::
 
-    from itr_fv.rve import FillerSpec, generate_rve, build_rve
+    from itr_fv.rve import FillerSpec, RVESpec, generate_rve, build_rve
+
+    spec = RVESpec(box_um=12.0, voxel_um=0.25)            # every setting, checked once
+    ms = generate_rve(spec, [FillerSpec.from_table1("Al2O3", 0.6)], seed=1)
+    ms, report = generate_rve_with_report(spec, fillers, seed=1)  # with the quality report
+    ms, seed = build_rve(spec, fillers, replica=0)         # the spec's seeds, with retries
 
 Modules: ``spec`` (:class:`~itr_fv.rve.spec.RVESpec`), ``packing`` (sphere packing),
-``generate`` (fillers, :func:`generate_rve`, :func:`build_rve`), ``microstructure`` (voxel
-images) and ``sphere_geometry`` (analytic sphere geometry on the grid).
+``generate`` (fillers, :func:`generate_rve`, :func:`generate_rve_with_report`,
+:func:`build_rve`), ``microstructure`` (voxel images) and ``sphere_geometry`` (analytic
+sphere geometry on the grid).
 """
 
 from .generate import (
@@ -18,9 +24,22 @@ from .generate import (
     SizeCut,
     build_rve,
     generate_rve,
+    generate_rve_with_report,
     packing_limit,
     size_cut,
 )
+from .spec import RVESpec
 
-__all__ = ["FillerSpec", "FillerReport", "RVEReport", "generate_rve", "packing_limit",
-           "build_rve", "PackedRVE", "SizeCut", "size_cut"]
+__all__ = [
+    "FillerReport",
+    "FillerSpec",
+    "PackedRVE",
+    "RVEReport",
+    "RVESpec",
+    "SizeCut",
+    "build_rve",
+    "generate_rve",
+    "generate_rve_with_report",
+    "packing_limit",
+    "size_cut",
+]

@@ -1,27 +1,33 @@
 """Dense periodic RVEs of lognormal polydisperse spheres (paper Sec. 2.4).
 
-:func:`generate_rve` draws number-weighted lognormal diameters for one or more fillers
-(:class:`FillerSpec`, Table 1 parameters), packs them without overlap in a periodic cube
+:func:`generate_rve` (``generate_rve(spec, fillers, seed)``) draws number-weighted lognormal
+diameters for one or more fillers (:class:`FillerSpec`, Table 1 parameters), packs them
+without overlap in the periodic cube of an :class:`~itr_fv.rve.spec.RVESpec`
 (:func:`itr_fv.rve.packing.pack_spheres`) up to the target volume fraction of every filler,
-and voxelizes them with particle ids (:meth:`Microstructure.from_spheres`).
+and voxelizes them with particle ids (:meth:`Microstructure.from_spheres`). Every setting
+of the RVE (box, voxel, size cuts, films, sampling, sweep limit) is a field of the spec,
+with its one default and its check there.
 
-The quality report (:class:`RVEReport`) is returned next to the microstructure when
-``return_report=True`` -- ``ms, report = generate_rve(..., return_report=True)`` -- and
-is not attached to the microstructure.
+:func:`generate_rve_with_report` returns the same microstructure with its quality report
+(:class:`RVEReport`, frozen); the report is not attached to the microstructure.
+:func:`build_rve` packs replica ``r`` of a spec with the spec's seeds (and redraws a failed
+packing): the package's own way to build an RVE.
 
 Size truncation
 ---------------
 Diameters are drawn from the lognormal truncated to ``[d_lo, d_hi]`` per filler:
 
-* ``d_hi = min(ppf(1 - tail_quantile), max_diameter_box_ratio * box_um, spec.d_max_um)``:
+* ``d_hi = min(ppf(1 - tail_quantile), max_diameter_box_ratio * box_um, filler.d_max_um)``:
   the far tail only (default ``tail_quantile = 1e-4``, i.e. fewer than one particle in a
-  typical RVE), unless the periodic box forces a smaller cut -- a particle larger than a
-  third of the box would interact with its own images. When that box cut removes more than
-  1 % of a filler's volume a ``UserWarning`` says how much (AlN of Table 1 in a 40 um box:
-  about 30 % of its volume lies in particles above 13.3 um).
-* ``d_lo = max(ppf(tail_quantile), min_diameter_voxels * voxel_um, spec.d_min_um)``: a
-  particle must span about two voxels to be resolved. If this cut removes more than 1 % of
-  a filler's volume or 5 % of its particles, the voxel is too coarse: ``ValueError``.
+  typical RVE), unless the periodic box forces a smaller cut -- a particle larger than
+  about half the box would interact with its own images (default ratio 0.45,
+  :data:`~itr_fv.rve.spec.MAX_DIAMETER_BOX_RATIO`). When that box cut removes more than
+  1 % of a filler's volume a ``UserWarning`` says how much (AlN of Table 1 in a 40 um box
+  at ratio 1/3: about 30 % of its volume lies in particles above 13.3 um).
+* ``d_lo = max(ppf(tail_quantile), min_diameter_voxels * voxel_um, filler.d_min_um)``: a
+  particle must span about two voxels (of ``cut_voxel_um``) to be resolved. If this cut
+  removes more than 1 % of a filler's volume or 5 % of its particles, the voxel is too
+  coarse: ``ValueError``.
 
 The cuts and the shares (number and volume) of the untruncated distribution they remove
 are reported per filler; :func:`size_cut` computes them for one filler without packing
@@ -60,11 +66,28 @@ from ..materials.psd import (
 )
 from .contact_film import ContactFilm
 from .microstructure import Microstructure, grid_slabs, label_counts
-from .packing import pack_spheres, pairs_within_gap
-from .spec import RVESpec, voxels_per_edge
+from .packing import PackingResult, pack_spheres, pairs_within_gap
+from .spec import (
+    MAX_DIAMETER_BOX_RATIO,
+    MIN_DIAMETER_VOXELS,
+    TAIL_QUANTILE,
+    RVESpec,
+    check_seed,
+)
 
-__all__ = ["FillerSpec", "FillerReport", "RVEReport", "generate_rve", "packing_limit",
-           "build_rve", "PackedRVE", "SizeCut", "size_cut", "stage_bar"]
+__all__ = [
+    "FillerReport",
+    "FillerSpec",
+    "PackedRVE",
+    "RVEReport",
+    "SizeCut",
+    "build_rve",
+    "generate_rve",
+    "generate_rve_with_report",
+    "packing_limit",
+    "size_cut",
+    "stage_bar",
+]
 
 
 @dataclass(frozen=True)
@@ -86,7 +109,8 @@ class FillerSpec:
         volume-weighted pair (laser diffraction) is converted with Hatch-Choate.
     d_min_um, d_max_um : float, optional
         Explicit truncation of the diameters, um (> 0). The generator may cut further
-        (see the module notes); ``d_max_um`` above a third of the box is an error.
+        (see the module notes); ``d_max_um`` above the spec's ``max_diameter_box_ratio``
+        of the box is an error.
     """
 
     material: str
@@ -144,7 +168,7 @@ class FillerSpec:
         return LogNormalPSD(float(self.mu), float(self.sigma), self.basis).to_number()
 
 
-@dataclass
+@dataclass(frozen=True)
 class FillerReport:
     """Per-filler numbers of :class:`RVEReport` (diameters in um, fractions absolute)."""
 
@@ -171,13 +195,21 @@ class FillerReport:
     ks_pvalue: float
 
 
-@dataclass
+@dataclass(frozen=True)
 class RVEReport:
-    """Quality report of :func:`generate_rve`.
+    """Quality report of an RVE (:func:`generate_rve_with_report`), frozen.
 
     Attributes
     ----------
-    fillers : list of FillerReport
+    seed : int
+        The packing seed.
+    box_um, voxel_um : float
+        Box and voxel edge, um.
+    shape : tuple of int
+        Voxels per axis.
+    min_gap_um : float
+        Thinnest matrix film the packer kept between two particles, um.
+    fillers : tuple of FillerReport
         Per filler: target / analytic (sphere volumes) / voxel volume fraction, truncation
         used (cuts, um, and the number and volume shares of the untruncated distribution
         they remove), the fit of the generated diameters (``mu_fit``, ``sigma_fit``: plain
@@ -187,12 +219,14 @@ class RVEReport:
     phi_total, phi_rcp_estimate, sigma_ln_mixture : float
         Total target fraction, the packing-limit estimate and the standard deviation of
         ``ln D`` it was evaluated at.
+    n_particles : int
+        Particles of all fillers.
     n_overlaps : int
         Pairs closer than ``min_gap_um`` in the exact check of the final table (0).
     smallest_gap_um : float
         Smallest surface gap between two particles, um.
     contact_gap_um : float
-        Threshold for the coordination number, um.
+        Threshold for the coordination number: half a voxel, um.
     n_contact_pairs : int
         Particle pairs with surface gap below ``contact_gap_um``.
     coordination_number : float
@@ -207,6 +241,8 @@ class RVEReport:
     seconds : dict
         Wall time per stage (``sample``, ``pack``, ``check``, ``voxelize``, ``report``,
         ``total``), s.
+    warnings : tuple of str
+        The warnings of the build (the box cutting a filler's coarse tail).
     """
 
     seed: int
@@ -214,7 +250,7 @@ class RVEReport:
     voxel_um: float
     shape: tuple[int, int, int]
     min_gap_um: float
-    fillers: list[FillerReport]
+    fillers: tuple[FillerReport, ...]
     phi_total: float
     phi_rcp_estimate: float
     sigma_ln_mixture: float
@@ -229,12 +265,14 @@ class RVEReport:
     neighbour_builds: int
     gap_counts: dict[str, int] = field(default_factory=dict)
     seconds: dict[str, float] = field(default_factory=dict)
-    warnings: list[str] = field(default_factory=list)
+    warnings: tuple[str, ...] = ()
 
     def to_dict(self) -> dict:
         """Plain JSON-serialisable dictionary."""
         d = asdict(self)
         d["shape"] = list(self.shape)
+        d["fillers"] = list(d["fillers"])
+        d["warnings"] = list(d["warnings"])
         return d
 
     def summary(self) -> str:
@@ -350,21 +388,6 @@ def _draw_to_volume(psd: LogNormalPSD, target_um3: float, lo: float, hi: float,
     return d * (target_um3 / vol) ** (1.0 / 3.0)
 
 
-def _cut_arguments(tail_quantile: float, min_diameter_voxels: float,
-                   max_diameter_box_ratio: float) -> tuple[float, float, float]:
-    """The size-cut arguments of :func:`generate_rve`, checked (ValueError naming one)."""
-    tq = _num(tail_quantile, "tail_quantile")
-    if not 0.0 < tq < 0.05:
-        raise ValueError(f"tail_quantile must lie in (0, 0.05), got {tail_quantile!r}")
-    mdv = _num(min_diameter_voxels, "min_diameter_voxels")
-    if mdv < 0:
-        raise ValueError(f"min_diameter_voxels must be >= 0, got {min_diameter_voxels!r}")
-    ratio = _num(max_diameter_box_ratio, "max_diameter_box_ratio")
-    if not 0.0 < ratio < 0.5:
-        raise ValueError(f"max_diameter_box_ratio must lie in (0, 0.5), got {ratio!r}")
-    return tq, mdv, ratio
-
-
 class SizeCut(NamedTuple):
     """The diameters one filler's RVE draws (:func:`size_cut`), um, and the shares of its
     untruncated number-weighted lognormal that the two cuts remove (fractions, 0-1)."""
@@ -380,22 +403,56 @@ class SizeCut(NamedTuple):
     box_limited: bool
 
 
-def size_cut(spec: FillerSpec, box_um: float, voxel_um: float, *,
-             tail_quantile: float = 1e-4, min_diameter_voxels: float = 2.0,
-             max_diameter_box_ratio: float = 1.0 / 3.0) -> SizeCut:
+def size_cut(filler: FillerSpec, box_um: float, voxel_um: float, *,
+             tail_quantile: float = TAIL_QUANTILE,
+             min_diameter_voxels: float = MIN_DIAMETER_VOXELS,
+             max_diameter_box_ratio: float = MAX_DIAMETER_BOX_RATIO) -> SizeCut:
     """The size truncation :func:`generate_rve` applies to one filler (module notes, "Size
     truncation"): the range ``[d_lo, d_hi]`` of the drawn diameters and the number and
     volume shares of the lognormal below and above it.
 
+    Parameters
+    ----------
+    filler : FillerSpec
+        The filler and its size distribution.
+    box_um, voxel_um : float
+        Box and voxel edge, um (an :class:`RVESpec`'s pair).
+    tail_quantile, max_diameter_box_ratio : float
+        As in :class:`RVESpec` (the same defaults, checked by it).
+    min_diameter_voxels : float
+        Smallest particle diameter, in voxels (>= 0; :attr:`RVESpec.min_diameter_voxels`).
+
+    Returns
+    -------
+    SizeCut
+
     Raises
     ------
     ValueError
-        Bad cut arguments, an explicit ``d_max_um`` above ``max_diameter_box_ratio`` of the
-        box, or a voxel too coarse for the small particles of the filler.
+        Bad cut arguments (named), an explicit ``d_max_um`` above ``max_diameter_box_ratio``
+        of the box, or a voxel too coarse for the small particles of the filler.
     """
-    tq, mdv, ratio = _cut_arguments(tail_quantile, min_diameter_voxels, max_diameter_box_ratio)
-    L, h = float(box_um), float(voxel_um)
-    s, psd = spec, spec.psd
+    RVESpec(box_um, voxel_um, max_diameter_box_ratio=max_diameter_box_ratio,
+            tail_quantile=tail_quantile)
+    mdv = _num(min_diameter_voxels, "min_diameter_voxels")
+    if mdv < 0:
+        raise ValueError(f"min_diameter_voxels must be >= 0, got {min_diameter_voxels!r}")
+    return _size_cut(filler, float(box_um), float(voxel_um), float(tail_quantile), mdv,
+                     float(max_diameter_box_ratio))
+
+
+def _spec_cut(filler: FillerSpec, spec: RVESpec) -> SizeCut:
+    """:func:`size_cut` of a filler in the RVE of ``spec`` (already checked)."""
+    return _size_cut(filler, float(spec.box_um), float(spec.voxel_um),
+                     float(spec.tail_quantile), float(spec.min_diameter_voxels),
+                     float(spec.max_diameter_box_ratio))
+
+
+def _size_cut(s: FillerSpec, L: float, h: float, tq: float, mdv: float,
+              ratio: float) -> SizeCut:
+    """:func:`size_cut` of checked arguments: box ``L`` and voxel ``h`` (um), tail quantile
+    ``tq``, smallest diameter ``mdv`` voxels, largest ``ratio`` of the box."""
+    psd = s.psd
     if s.d_max_um is not None and s.d_max_um > ratio * L * (1 + 1e-12):
         raise ValueError(f"box_um: a box of {L:g} um is too small for particles up to "
                          f"d_max_um = {s.d_max_um:g} um of {s.material} (the box must be at "
@@ -478,67 +535,227 @@ def stage_bar(desc: str, enabled: bool = True) -> Iterator[Callable[[float], Non
 
 
 # --------------------------------------------------------------------------- main
-def generate_rve(specs: Sequence[FillerSpec] | FillerSpec, box_um: float, voxel_um: float,
-                 seed: int, min_gap_um: float = 0.0, matrix: str = "silicone", *,
-                 materials: Iterable[str] | None = None, tail_quantile: float = 1e-4,
-                 min_diameter_voxels: float = 2.0, max_diameter_box_ratio: float = 1.0 / 3.0,
-                 contact_gap_um: float | None = None, film_um: float | None = None,
-                 inflate: float = 1e-3,
-                 max_iter: int = 400_000, sampling: str = "stratified",
-                 return_report: bool = False, progress: bool = True
-                 ) -> Microstructure | tuple[Microstructure, RVEReport]:
+#: The packer's relative clearance of the contact distance (``inflate`` of
+#: :func:`itr_fv.rve.packing.pack_spheres`): spheres it leaves touching are
+#: ``inflate/2 .. inflate`` times ``R_i + R_j`` apart beyond ``min_gap_um``, a clearance the
+#: particle table's :class:`~itr_fv.rve.contact_film.ContactFilm` takes out of the contacts.
+_INFLATE = 1e-3
+
+
+@dataclass(frozen=True)
+class _Packed:
+    """What one RVE build made: the microstructure and what its report is computed from.
+
+    Diameters ``diameters[k]`` (um) of filler ``k`` with the size cut ``cuts[k]``;
+    ``owner`` the filler of every particle (particle table order); ``gaps`` the surface
+    gaps (um) of the pairs closer than ``max(contact_gap_um, min_gap_um)``; ``seconds``
+    the wall time of the stages so far, s.
+    """
+
+    spec: RVESpec
+    seed: int
+    fillers: tuple[FillerSpec, ...]
+    cuts: tuple[SizeCut, ...]
+    phi_total: float
+    phi_rcp: float
+    sigma_ln: float
+    diameters: tuple[np.ndarray, ...]
+    owner: np.ndarray
+    centers_um: np.ndarray
+    packing: PackingResult
+    gaps_um: np.ndarray
+    microstructure: Microstructure
+    warnings: tuple[str, ...]
+    seconds: dict[str, float]
+    started: float
+
+    @property
+    def all_diameters(self) -> np.ndarray:
+        """Diameters of all particles in particle table order, um."""
+        return np.concatenate(self.diameters)
+
+    @property
+    def contact_gap_um(self) -> float:
+        """The coordination number's contact threshold: half a voxel, um."""
+        return 0.5 * float(self.spec.voxel_um)
+
+
+def _checked_fillers(fillers: Sequence[FillerSpec] | FillerSpec, matrix: str,
+                     materials: Iterable[str] | None) -> tuple[FillerSpec, ...]:
+    """The fillers as a tuple, checked against each other, the matrix and the known phases
+    (ValueError naming ``fillers``, ``matrix`` or ``materials``)."""
+    if isinstance(fillers, FillerSpec):
+        fillers = [fillers]
+    if (isinstance(fillers, (str, bytes)) or not isinstance(fillers, Sequence)
+            or len(fillers) == 0):
+        raise ValueError("fillers: expected a FillerSpec or a non-empty sequence of FillerSpec")
+    for s in fillers:
+        if not isinstance(s, FillerSpec):
+            raise ValueError(f"fillers: expected FillerSpec items, got {type(s).__name__}")
+    if not isinstance(matrix, str) or not matrix:
+        raise ValueError(f"matrix: expected a phase name, got {matrix!r}")
+    if materials is not None:
+        known = set(getattr(materials, "phases", None) or materials)
+        for s in fillers:
+            if s.material not in known:
+                raise ValueError(f"fillers: unknown material {s.material!r} (known: "
+                                 f"{sorted(known)})")
+        if matrix not in known:
+            raise ValueError(f"matrix: unknown material {matrix!r} (known: {sorted(known)})")
+    for s in fillers:
+        if s.material == matrix:
+            raise ValueError(f"fillers: filler material {s.material!r} is the matrix phase")
+    phi_total = float(sum(s.volume_fraction for s in fillers))
+    if phi_total >= 1.0:
+        raise ValueError(f"fillers: volume fractions sum to {phi_total:.4g} >= 1")
+    return tuple(fillers)
+
+
+def _size_cuts(spec: RVESpec, fillers: Sequence[FillerSpec]
+               ) -> tuple[tuple[SizeCut, ...], tuple[str, ...]]:
+    """Every filler's size cut, and the warnings (also issued as ``UserWarning``) of the
+    fillers whose coarse tail the box cuts by more than 1 % of their volume."""
+    cuts, said = [], []
+    for s in fillers:
+        cut = _spec_cut(s, spec)
+        if cut.box_limited and cut.volume_high > 0.01:
+            psd = s.psd
+            msg = (f"{s.material}: the {float(spec.box_um):g} um box limits diameters to "
+                   f"{cut.d_hi_um:.3g} um (box/{1 / spec.max_diameter_box_ratio:.3g}); the cut "
+                   f"removes {cut.volume_high:.1%} of the volume ({cut.number_high:.2%} of "
+                   f"the particles) of the lognormal (mu={psd.mu}, sigma={psd.sigma}) -- the "
+                   "RVE under-represents its coarse particles")
+            warnings.warn(msg, UserWarning, stacklevel=4)  # at generate_rve's caller
+            said.append(msg)
+        cuts.append(cut)
+    return tuple(cuts), tuple(said)
+
+
+def _check_packing_limit(fillers: Sequence[FillerSpec], cuts: Sequence[SizeCut]
+                         ) -> tuple[float, float, float]:
+    """``(phi_total, phi_rcp, sigma_ln)``: the fillers' total fraction, below the packing
+    limit estimate ``phi_rcp`` at the mixture's ``sigma_ln`` (else ValueError)."""
+    phi_total = float(sum(s.volume_fraction for s in fillers))
+    phi_rcp, sig_mix = packing_limit(fillers, [(c.d_lo_um, c.d_hi_um) for c in cuts])
+    if phi_total > phi_rcp:
+        raise ValueError(f"fillers: total volume fraction {phi_total:.4g} exceeds the estimated "
+                         f"random-close-packing limit {phi_rcp:.4f} of these size "
+                         f"distributions (Farr 2013 lognormal fit at sigma_ln = {sig_mix:.3f})")
+    return phi_total, phi_rcp, sig_mix
+
+
+def _draw_diameters(spec: RVESpec, fillers: Sequence[FillerSpec], cuts: Sequence[SizeCut],
+                    rng: np.random.Generator) -> tuple[np.ndarray, ...]:
+    """Every filler's diameters (um), in filler order from one stream of ``rng``, their
+    sphere volumes adding up to its volume fraction of the box."""
+    box3 = float(spec.box_um) ** 3
+    return tuple(_draw_to_volume(s.psd, s.volume_fraction * box3, c.d_lo_um, c.d_hi_um, rng,
+                                 spec.sampling == "stratified")
+                 for s, c in zip(fillers, cuts))
+
+
+def _pack(spec: RVESpec, radii_um: np.ndarray, rng: np.random.Generator,
+          limits: tuple[float, float], progress: bool) -> PackingResult:
+    """The packed spheres (RuntimeError when the packer does not converge within
+    ``spec.max_sweeps``; ``limits`` = total fraction and its packing-limit estimate, for the
+    message)."""
+    with stage_bar("packing", progress) as bar:
+        res = pack_spheres(radii_um, float(spec.box_um), rng,
+                           min_gap=float(spec.min_gap_um), inflate=_INFLATE,
+                           max_iter=spec.max_sweeps, progress=bar)
+    if not res.converged:
+        raise RuntimeError(f"packing did not converge in {res.iterations} sweeps (largest "
+                           f"relative overlap {res.max_rel_overlap:.3g}) at total fraction "
+                           f"{limits[0]:.4f}; the limit estimate is {limits[1]:.4f} -- lower "
+                           f"the fractions or raise max_sweeps")
+    return res
+
+
+def _near_gaps(spec: RVESpec, centers_um: np.ndarray, radii_um: np.ndarray) -> np.ndarray:
+    """Surface gaps (um) of the pairs within half a voxel or ``min_gap_um``, from the exact
+    check (RuntimeError when a pair is closer than ``min_gap_um``)."""
+    L, gap = float(spec.box_um), float(spec.min_gap_um)
+    reach = max(0.5 * float(spec.voxel_um), gap) + 1e-9 * L
+    _, _, g = pairs_within_gap(centers_um, radii_um, L, reach)
+    n_bad = int(np.count_nonzero(g < gap))
+    if n_bad:
+        raise RuntimeError(f"packing left {n_bad} pairs closer than min_gap_um={gap:g} um")
+    return g
+
+
+def _voxelize(spec: RVESpec, centers_um: np.ndarray, radii_um: np.ndarray,
+              materials: Sequence[str], matrix: str, progress: bool) -> Microstructure:
+    """The voxel image of the spheres (um in, the microstructure in metres), with the
+    contact film of ``spec``."""
+    film = ContactFilm(film_m=float(spec.contact_film_um) * 1e-6,
+                       packing_gap_m=float(spec.min_gap_um) * 1e-6, tolerance=_INFLATE)
+    with stage_bar("voxelizing", progress) as bar:
+        return Microstructure.from_spheres(
+            centers_um * 1e-6, radii_um * 1e-6, materials, box_m=float(spec.box_um) * 1e-6,
+            shape=spec.n, matrix=matrix, contact=film, progress=bar)
+
+
+def _build(spec: RVESpec, fillers: Sequence[FillerSpec] | FillerSpec, seed: int,
+           matrix: str, materials: Iterable[str] | None, progress: bool) -> _Packed:
+    """Check, cut, draw, pack, check and voxelize: the work of :func:`generate_rve`."""
+    t_start = time.perf_counter()
+    if not isinstance(spec, RVESpec):
+        raise ValueError(f"spec: expected an RVESpec, got {type(spec).__name__}")
+    seed = check_seed(seed)
+    fillers = _checked_fillers(fillers, matrix, materials)
+    cuts, said = _size_cuts(spec, fillers)
+    limits = _check_packing_limit(fillers, cuts)
+    rng = np.random.default_rng(seed)
+    t0 = time.perf_counter()
+    diam = _draw_diameters(spec, fillers, cuts, rng)
+    d_all = np.concatenate(diam)
+    owner = np.concatenate([np.full(d.size, k, dtype=np.int64) for k, d in enumerate(diam)])
+    t1 = time.perf_counter()
+    res = _pack(spec, 0.5 * d_all, rng, limits[:2], progress)
+    t2 = time.perf_counter()
+    gaps = _near_gaps(spec, res.centers, 0.5 * d_all)
+    t3 = time.perf_counter()
+    ms = _voxelize(spec, res.centers, 0.5 * d_all, [fillers[k].material for k in owner],
+                   matrix, progress)
+    seconds = {"sample": t1 - t0, "pack": res.seconds, "check": t3 - t2,
+               "voxelize": time.perf_counter() - t3}
+    return _Packed(spec, seed, fillers, cuts, *limits, diam, owner, res.centers, res, gaps,
+                   ms, said, seconds, t_start)
+
+
+def generate_rve(spec: RVESpec, fillers: Sequence[FillerSpec] | FillerSpec, seed: int, *,
+                 matrix: str = "silicone", materials: Iterable[str] | None = None,
+                 progress: bool = True) -> Microstructure:
     """Dense periodic RVE of non-overlapping lognormal polydisperse spheres.
 
     Parameters
     ----------
-    specs : FillerSpec or sequence of FillerSpec
+    spec : RVESpec
+        Box and voxel edge, um, the size cuts (``tail_quantile``,
+        ``max_diameter_box_ratio``, the two-voxel fine cut of ``cut_voxel_um``), the
+        thinnest matrix film the packer keeps between two particles (``min_gap_um``), the
+        film touching particles meet at (``film_um``, default ``min_gap_um``), the drawing
+        of the diameters (``sampling``) and the packer's sweep limit (``max_sweeps``). Its
+        ``seed`` is not used: the packing seed is ``seed``.
+
+        ``min_gap_um`` is a physical parameter of the composite, the silicone film that
+        separates touching particles: under the gap contact model
+        (``Materials(contact="gap")``) it is the film of every contact, whose resistance
+        ``2 R_b + d / k_m`` it enters; the pairs the packer leaves touching meet at exactly
+        this film, whatever their size (the particle table's
+        :class:`~itr_fv.rve.contact_film.ContactFilm`; the packer's clearance is taken out
+        of the contact geometry). 0 (default): particles in contact through their two
+        interface resistances alone.
+    fillers : FillerSpec or sequence of FillerSpec
         Filler types with their size distribution and target volume fraction.
-    box_um : float
-        Edge of the periodic cube, um (the paper: 40).
-    voxel_um : float
-        Voxel edge, um; ``box_um / voxel_um`` must be an integer.
     seed : int
-        Seed of ``numpy.random.default_rng``; the same seed gives the same particle table
-        bit for bit (on the same platform and library versions).
-    min_gap_um : float
-        Thinnest matrix film between two particles, um (>= 0): a physical parameter of the
-        composite, the silicone film that separates touching particles. Under the gap contact
-        model (``Materials(contact="gap")``) it is the film of every contact, whose
-        resistance ``2 R_b + d / k_m`` it enters: the pairs the packer leaves touching meet
-        at exactly this film, whatever their size (the particle table's
-        :class:`~itr_fv.rve.contact_film.ContactFilm`; the packer's clearance of
-        ``inflate/2 .. inflate`` times the radii is taken out of the contact geometry).
-        0 (default): particles in contact through their two interface resistances alone.
-        The report's ``gap_counts`` gives the distribution of the packed gaps.
+        Seed of ``numpy.random.default_rng`` (>= 0); the same seed gives the same particle
+        table bit for bit (on the same platform and library versions).
     matrix : str
         Name of the matrix phase.
     materials : iterable of str or Materials, optional
         Known phase names (e.g. the keys of ``Materials.conductivity`` or a ``Materials``
         object): every filler and the matrix must be among them.
-    tail_quantile : float
-        Number-probability cut of each far tail of the size distribution (see module notes).
-    min_diameter_voxels : float
-        Smallest particle diameter, in voxels.
-    max_diameter_box_ratio : float
-        Largest particle diameter as a fraction of the box (default 1/3).
-    contact_gap_um : float, optional
-        Gap threshold for the coordination number, um (default ``voxel_um / 2``).
-    film_um : float, optional
-        The film touching particles meet at, um (default ``min_gap_um``); the packing does
-        not depend on it.
-    inflate : float
-        Relative safety margin of the packer's contact distance (see
-        :func:`itr_fv.rve.packing.pack_spheres`).
-    max_iter : int
-        Sweep limit of the packer.
-    sampling : {"stratified", "iid"}
-        ``"stratified"`` (default): the expected number of diameters is drawn by
-        one-dimensional Latin hypercube sampling of the (truncated) number distribution, so
-        a few hundred particles already reproduce mu and sigma closely (the KS p-values are
-        then near 1, as expected of a sample more even than an independent one);
-        ``"iid"``: independent draws.
-    return_report : bool
-        Return ``(ms, report)`` instead of ``ms``.
     progress : bool
         Progress bars (:func:`stage_bar`, on stderr) for the packing and the voxelization
         when they last over :data:`PROGRESS_DELAY_S`; False: none. Either way the packing
@@ -547,166 +764,100 @@ def generate_rve(specs: Sequence[FillerSpec] | FillerSpec, box_um: float, voxel_
 
     Returns
     -------
-    Microstructure or (Microstructure, RVEReport)
+    Microstructure
         Voxel image (material and particle ids, particle table in metres).
+        :func:`generate_rve_with_report` gives the same microstructure with its quality
+        report.
 
     Raises
     ------
     ValueError
-        Bad arguments (named in the message), a total fraction beyond the packing-limit
-        estimate, a voxel too coarse for the particles, an explicit ``d_max_um`` above a
-        third of the box, an unknown material.
+        Bad arguments (named in the message; the settings of ``spec`` are checked when it
+        is made), a total fraction beyond the packing-limit estimate, a voxel too coarse
+        for the particles, an explicit ``d_max_um`` above ``max_diameter_box_ratio`` of the
+        box, an unknown material.
     RuntimeError
-        The packer did not reach a non-overlapping state within ``max_iter`` sweeps.
+        The packer did not reach a non-overlapping state within ``spec.max_sweeps`` sweeps.
     """
-    t_start = time.perf_counter()
-    # ------------------------------------------------------------ arguments
-    if isinstance(specs, FillerSpec):
-        specs = [specs]
-    if isinstance(specs, (str, bytes)) or not isinstance(specs, Sequence) or len(specs) == 0:
-        raise ValueError("specs: expected a FillerSpec or a non-empty sequence of FillerSpec")
-    specs = list(specs)
-    for s in specs:
-        if not isinstance(s, FillerSpec):
-            raise ValueError(f"specs: expected FillerSpec items, got {type(s).__name__}")
-    nvox = voxels_per_edge(box_um, voxel_um)
-    L, h = float(box_um), float(voxel_um)
-    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
-        raise ValueError(f"seed: expected a non-negative integer, got {seed!r}")
-    gap = _num(min_gap_um, "min_gap_um")
-    if gap < 0:
-        raise ValueError(f"min_gap_um must be >= 0 um, got {min_gap_um!r}")
-    stated = gap if film_um is None else _num(film_um, "film_um")
-    if stated < 0:
-        raise ValueError(f"film_um must be >= 0 um, got {film_um!r}")
-    if not isinstance(matrix, str) or not matrix:
-        raise ValueError(f"matrix: expected a phase name, got {matrix!r}")
-    _cut_arguments(tail_quantile, min_diameter_voxels, max_diameter_box_ratio)
-    if sampling not in ("stratified", "iid"):
-        raise ValueError(f"sampling: expected 'stratified' or 'iid', got {sampling!r}")
-    cgap = 0.5 * h if contact_gap_um is None else _num(contact_gap_um, "contact_gap_um")
-    if cgap < 0:
-        raise ValueError(f"contact_gap_um must be >= 0 um, got {contact_gap_um!r}")
-    if materials is not None:
-        known = set(getattr(materials, "phases", None) or materials)
-        for s in specs:
-            if s.material not in known:
-                raise ValueError(f"specs: unknown material {s.material!r} (known: {sorted(known)})")
-        if matrix not in known:
-            raise ValueError(f"matrix: unknown material {matrix!r} (known: {sorted(known)})")
-    for s in specs:
-        if s.material == matrix:
-            raise ValueError(f"specs: filler material {s.material!r} is the matrix phase")
-    phi_total = float(sum(s.volume_fraction for s in specs))
-    if phi_total >= 1.0:
-        raise ValueError(f"specs: volume fractions sum to {phi_total:.4g} >= 1")
+    return _build(spec, fillers, seed, matrix, materials, progress).microstructure
 
-    # ------------------------------------------------------------ truncation
-    cuts: list[tuple[float, float]] = []
-    shares: list[tuple[float, float, float, float]] = []
-    warn: list[str] = []
-    for s in specs:
-        cut = size_cut(s, L, h, tail_quantile=tail_quantile,
-                       min_diameter_voxels=min_diameter_voxels,
-                       max_diameter_box_ratio=max_diameter_box_ratio)
-        if cut.box_limited and cut.volume_high > 0.01:
-            psd = s.psd
-            msg = (f"{s.material}: the {L:g} um box limits diameters to {cut.d_hi_um:.3g} um "
-                   f"(box/{1 / max_diameter_box_ratio:.3g}); the cut removes "
-                   f"{cut.volume_high:.1%} of the volume ({cut.number_high:.2%} of the "
-                   f"particles) of the lognormal (mu={psd.mu}, sigma={psd.sigma}) -- the RVE "
-                   "under-represents its coarse particles")
-            warnings.warn(msg, UserWarning, stacklevel=2)
-            warn.append(msg)
-        cuts.append((cut.d_lo_um, cut.d_hi_um))
-        shares.append((cut.number_low, cut.number_high, cut.volume_low, cut.volume_high))
 
-    phi_rcp, sig_mix = packing_limit(specs, cuts)
-    if phi_total > phi_rcp:
-        raise ValueError(f"specs: total volume fraction {phi_total:.4g} exceeds the estimated "
-                         f"random-close-packing limit {phi_rcp:.4f} of these size "
-                         f"distributions (Farr 2013 lognormal fit at sigma_ln = {sig_mix:.3f})")
+def generate_rve_with_report(spec: RVESpec, fillers: Sequence[FillerSpec] | FillerSpec,
+                             seed: int, *, matrix: str = "silicone",
+                             materials: Iterable[str] | None = None, progress: bool = True
+                             ) -> tuple[Microstructure, RVEReport]:
+    """:func:`generate_rve` and the quality report of the RVE it packed.
 
-    # ------------------------------------------------------------ sampling
-    rng = np.random.default_rng(int(seed))
-    t0 = time.perf_counter()
-    diam: list[np.ndarray] = []
-    for s, (lo, hi) in zip(specs, cuts):
-        diam.append(_draw_to_volume(s.psd, s.volume_fraction * L ** 3, lo, hi, rng,
-                                    sampling == "stratified"))
-    d_all = np.concatenate(diam)
-    owner = np.concatenate([np.full(d.size, k, dtype=np.int64) for k, d in enumerate(diam)])
-    t_sample = time.perf_counter() - t0
+    Parameters
+    ----------
+    spec, fillers, seed, matrix, materials, progress
+        As in :func:`generate_rve` (the same arguments give the same microstructure).
 
-    # ------------------------------------------------------------ packing
-    with stage_bar("packing", progress) as bar:
-        res = pack_spheres(0.5 * d_all, L, rng, min_gap=gap, inflate=inflate,
-                           max_iter=max_iter, progress=bar)
-    if not res.converged:
-        raise RuntimeError(f"packing did not converge in {res.iterations} sweeps (largest "
-                           f"relative overlap {res.max_rel_overlap:.3g}) at total fraction "
-                           f"{phi_total:.4f}; the limit estimate is {phi_rcp:.4f} -- lower the "
-                           f"fractions or raise max_iter")
-    centers = res.centers
-    t1 = time.perf_counter()
-    pi, pj, g = pairs_within_gap(centers, 0.5 * d_all, L, max(cgap, gap) + 1e-9 * L)
-    n_bad = int(np.count_nonzero(g < gap))
-    if n_bad:
-        raise RuntimeError(f"packing left {n_bad} pairs closer than min_gap_um={gap:g} um")
-    t_check = time.perf_counter() - t1
+    Returns
+    -------
+    microstructure : Microstructure
+    report : RVEReport
+        Fractions, size cuts and fits per filler, packing limit, gaps and contacts, timings.
+    """
+    packed = _build(spec, fillers, seed, matrix, materials, progress)
+    return packed.microstructure, _report(packed)
 
-    # ------------------------------------------------------------ voxelize
-    t2 = time.perf_counter()
-    mats = [specs[k].material for k in owner]
-    with stage_bar("voxelizing", progress) as bar:
-        ms = Microstructure.from_spheres(
-            centers * 1e-6, 0.5 * d_all * 1e-6, mats, box_m=L * 1e-6, shape=nvox,
-            matrix=matrix, contact=ContactFilm(film_m=stated * 1e-6, packing_gap_m=gap * 1e-6,
-                                               tolerance=float(inflate)), progress=bar)
-    t_vox = time.perf_counter() - t2
-    if not return_report:
-        return ms
 
-    # ------------------------------------------------------------ report
-    t3 = time.perf_counter()
-    counts = label_counts(ms.particle_ids, d_all.size + 1)[1:]
-    nvox3 = float(nvox) ** 3
+# --------------------------------------------------------------------------- report
+def _filler_reports(packed: _Packed) -> tuple[FillerReport, ...]:
+    """Per filler: fractions (target, analytic, voxel), size cut and the fit of the drawn
+    diameters."""
     from scipy import stats  # here, not at import: 0.9 s every command would wait for
 
-    fillers: list[FillerReport] = []
-    for k, s in enumerate(specs):
-        d = diam[k]
-        lo, hi = cuts[k]
+    ms = packed.microstructure
+    counts = label_counts(ms.particle_ids, packed.owner.size + 1)[1:]
+    nvox3 = float(packed.spec.n) ** 3
+    box3 = float(packed.spec.box_um) ** 3
+    out = []
+    for k, (s, d, cut) in enumerate(zip(packed.fillers, packed.diameters, packed.cuts)):
         psd = s.psd
+        lo, hi = cut.d_lo_um, cut.d_hi_um
         mu_f, s_f = fit_sample(d) if d.size > 1 else (math.log(d[0]), 0.0)
         mu_t, s_t = fit_truncated_sample(d, lo, hi) if d.size > 2 else (mu_f, s_f)
         ks = stats.kstest(d, psd.truncated_cdf(lo, hi))
-        nl, nh, vl, vh = shares[k]
-        fillers.append(FillerReport(
+        out.append(FillerReport(
             material=s.material, target_fraction=float(s.volume_fraction),
-            analytic_fraction=float(np.sum(math.pi / 6 * d ** 3) / L ** 3),
-            voxel_fraction=float(counts[owner == k].sum() / nvox3),
+            analytic_fraction=float(np.sum(math.pi / 6 * d ** 3) / box3),
+            voxel_fraction=float(counts[packed.owner == k].sum() / nvox3),
             n_particles=int(d.size), mu_target=psd.mu, sigma_target=psd.sigma,
-            d_lo_um=lo, d_hi_um=hi, cut_number_low=nl, cut_number_high=nh,
-            cut_volume_low=vl, cut_volume_high=vh, d_min_drawn_um=float(d.min()),
+            d_lo_um=lo, d_hi_um=hi, cut_number_low=cut.number_low,
+            cut_number_high=cut.number_high, cut_volume_low=cut.volume_low,
+            cut_volume_high=cut.volume_high, d_min_drawn_um=float(d.min()),
             d_max_drawn_um=float(d.max()), mu_fit=mu_f, sigma_fit=s_f,
             mu_fit_truncated=mu_t, sigma_fit_truncated=s_t,
             ks_statistic=float(ks.statistic), ks_pvalue=float(ks.pvalue)))
+    return tuple(out)
+
+
+def _report(packed: _Packed) -> RVEReport:
+    """The quality report of one build."""
+    t0 = time.perf_counter()
+    spec, d_all, g = packed.spec, packed.all_diameters, packed.gaps_um
+    fillers = _filler_reports(packed)
+    cgap = packed.contact_gap_um
     n_contact = int(np.count_nonzero(g < cgap))
-    _, _, g_all = pairs_within_gap(centers, 0.5 * d_all, L, GAP_BINS_UM[-1])
+    _, _, g_all = pairs_within_gap(packed.centers_um, 0.5 * d_all, float(spec.box_um),
+                                   GAP_BINS_UM[-1])
     gap_counts = {f"<{b:g} um": int(np.count_nonzero(g_all < b)) for b in GAP_BINS_UM}
-    report = RVEReport(
-        seed=int(seed), box_um=L, voxel_um=h, shape=(nvox,) * 3, min_gap_um=gap,
-        fillers=fillers, phi_total=phi_total, phi_rcp_estimate=phi_rcp,
-        sigma_ln_mixture=sig_mix, n_particles=int(d_all.size), n_overlaps=n_bad,
+    face_contacts = _face_contacts(packed.microstructure.particle_ids)
+    seconds = {**packed.seconds, "report": time.perf_counter() - t0,
+               "total": time.perf_counter() - packed.started}
+    return RVEReport(
+        seed=packed.seed, box_um=float(spec.box_um), voxel_um=float(spec.voxel_um),
+        shape=spec.shape, min_gap_um=float(spec.min_gap_um), fillers=fillers,
+        phi_total=packed.phi_total, phi_rcp_estimate=packed.phi_rcp,
+        sigma_ln_mixture=packed.sigma_ln, n_particles=int(d_all.size),
+        n_overlaps=int(np.count_nonzero(g < spec.min_gap_um)),
         smallest_gap_um=float(g.min()) if g.size else math.inf, contact_gap_um=cgap,
         n_contact_pairs=n_contact, coordination_number=2.0 * n_contact / d_all.size,
-        voxel_face_contacts=_face_contacts(ms.particle_ids), iterations=res.iterations,
-        neighbour_builds=res.neighbour_builds, gap_counts=gap_counts, warnings=warn)
-    report.seconds = {"sample": t_sample, "pack": res.seconds, "check": t_check,
-                      "voxelize": t_vox, "report": time.perf_counter() - t3,
-                      "total": time.perf_counter() - t_start}
-    return ms, report
+        voxel_face_contacts=face_contacts, iterations=packed.packing.iterations,
+        neighbour_builds=packed.packing.neighbour_builds, gap_counts=gap_counts,
+        seconds=seconds, warnings=packed.warnings)
 
 
 class PackedRVE(NamedTuple):
@@ -760,12 +911,7 @@ def build_rve(spec: RVESpec, fillers: Sequence[FillerSpec] | FillerSpec, replica
         with warnings.catch_warnings():
             if not warn_box_cut:
                 warnings.simplefilter("ignore", UserWarning)
-            ms = generate_rve(fillers, box_um=spec.box_um, voxel_um=spec.voxel_um, seed=seed,
-                              min_gap_um=spec.min_gap_um, film_um=spec.film_um,
-                              matrix=matrix, tail_quantile=spec.tail_quantile,
-                              max_diameter_box_ratio=spec.max_diameter_box_ratio,
-                              min_diameter_voxels=spec.min_diameter_voxels,
-                              progress=progress)
+            ms = generate_rve(spec, fillers, seed=seed, matrix=matrix, progress=progress)
         return PackedRVE(ms, seed)
 
     for seed in retries:
