@@ -142,7 +142,7 @@ class FillerSpec:
             raise ValueError(f"d_min_um ({self.d_min_um}) must be below d_max_um ({self.d_max_um})")
 
     @classmethod
-    def from_table1(cls, material: str, volume_fraction: float, **kwargs: object) -> "FillerSpec":
+    def from_table1(cls, material: str, volume_fraction: float, **kwargs: object) -> FillerSpec:
         """Filler with the paper's Table 1 distribution (``"Al2O3"`` or ``"AlN"``): a
         shorthand for scripts and tests; the package's own code takes a filler's sizes from
         its material system."""
@@ -155,7 +155,7 @@ class FillerSpec:
 
     @classmethod
     def of(cls, material: str, psd: LogNormalPSD, volume_fraction: float, *,
-           number_read_as: str = "number") -> "FillerSpec":
+           number_read_as: str = "number") -> FillerSpec:
         """Filler of a stated size distribution (a material system's): a volume-basis
         statement as stated; a number-basis one read in ``number_read_as`` (the basis
         question of the paper's Table 1, ``ForwardSettings.psd_basis``)."""
@@ -277,13 +277,13 @@ class RVEReport:
 
     def summary(self) -> str:
         """Multi-line human-readable summary."""
-        lines = [f"RVE {self.box_um:g} um, voxel {self.voxel_um:g} um {self.shape}, seed "
-                 f"{self.seed}: {self.n_particles} particles, phi {self.phi_total:.4f} "
-                 f"(limit estimate {self.phi_rcp_estimate:.3f} at sigma_ln "
-                 f"{self.sigma_ln_mixture:.3f})",
-                 f"  overlaps {self.n_overlaps}, smallest gap {self.smallest_gap_um:.3g} um, "
-                 f"coordination {self.coordination_number:.2f} (gap < {self.contact_gap_um:g} "
-                 f"um), voxel-face contacts {self.voxel_face_contacts}",
+        lines = [(f"RVE {self.box_um:g} um, voxel {self.voxel_um:g} um {self.shape}, seed "
+                  f"{self.seed}: {self.n_particles} particles, phi {self.phi_total:.4f} "
+                  f"(limit estimate {self.phi_rcp_estimate:.3f} at sigma_ln "
+                  f"{self.sigma_ln_mixture:.3f})"),
+                 (f"  overlaps {self.n_overlaps}, smallest gap {self.smallest_gap_um:.3g} um, "
+                  f"coordination {self.coordination_number:.2f} (gap < "
+                  f"{self.contact_gap_um:g} um), voxel-face contacts {self.voxel_face_contacts}"),
                  "  pairs with a gap " + ", ".join(f"{k}: {v}"
                                                    for k, v in self.gap_counts.items()),
                  f"  packing {self.iterations} sweeps, {self.neighbour_builds} list builds; "
@@ -358,7 +358,7 @@ def _draw_to_volume(psd: LogNormalPSD, target_um3: float, lo: float, hi: float,
     target.
     """
     mean_v = math.pi / 6 * psd.truncated_moment_um(3.0, lo, hi)
-    batch = max(1, int(round(target_um3 / mean_v)))
+    batch = max(1, round(target_um3 / mean_v))
     parts: list[np.ndarray] = []
     total = 0.0
     first = True

@@ -85,6 +85,66 @@ def _positive_length(value: float, argument: str) -> float:
     return v
 
 
+def _cubic_grid(box_m: float | Sequence[float], n: tuple[int, int, int]
+                ) -> tuple[np.ndarray, float]:
+    """The box edges (3,), m, and the voxel edge h, m, of a grid of ``n`` cubic voxels
+    (ValueError naming ``box_m`` or ``box_m/shape``)."""
+    box = np.broadcast_to(np.asarray(box_m, dtype=np.float64), (3,)).copy() \
+        if np.ndim(box_m) <= 1 and np.size(box_m) in (1, 3) else None
+    if box is None:
+        raise ValueError(f"box_m: expected a length or three lengths (m), got {box_m!r}")
+    for d in range(3):
+        _positive_length(box[d], "box_m")
+    hs = box / np.array(n)
+    h = float(hs[0])
+    if not np.allclose(hs, h, rtol=1e-9, atol=0.0):
+        raise ValueError(f"box_m/shape: voxels must be cubic, box {box.tolist()} m over "
+                         f"shape {n} gives edges {hs.tolist()}")
+    return box, h
+
+
+def _sphere_table(centers_m: np.ndarray, radii_m: np.ndarray, box: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """Centres (P, 3) and radii (P,), m, as float arrays, checked: finite, radii > 0 and
+    every sphere smaller than the periodic box (ValueError naming the argument)."""
+    c = np.asarray(centers_m, dtype=np.float64)
+    r = np.asarray(radii_m, dtype=np.float64)
+    if c.ndim != 2 or c.shape[1] != 3:
+        raise ValueError(f"centers_m: expected shape (P, 3), got {c.shape}")
+    if r.shape != (c.shape[0],):
+        raise ValueError(f"radii_m: expected shape ({c.shape[0]},), got {r.shape}")
+    if not (np.all(np.isfinite(c)) and np.all(np.isfinite(r))):
+        raise ValueError("centers_m/radii_m: NaN or inf in the sphere table")
+    if np.any(r <= 0):
+        raise ValueError("radii_m: every radius must be > 0 (m)")
+    if r.size and np.any(2 * r >= box.min()):
+        raise ValueError(f"radii_m: a sphere of diameter {2 * r.max():.4g} m does not fit the "
+                         f"periodic box {box.min():.4g} m")
+    return c, r
+
+
+def _sphere_phases(materials: Sequence[str] | str, matrix: str, count: int
+                   ) -> tuple[np.ndarray, list[str], np.ndarray]:
+    """The phase of each of ``count`` spheres (object array), the phase names (the matrix
+    first, then the fillers in order of appearance) and each sphere's material id."""
+    if isinstance(materials, str):
+        mats = np.array([materials] * count, dtype=object)
+    else:
+        mats = np.asarray(list(materials), dtype=object)
+        if mats.shape != (count,):
+            raise ValueError(f"materials: expected {count} names, got {mats.shape}")
+    phase_name(matrix, "matrix")
+    phase_names = [matrix]
+    for m in mats:
+        phase_name(m, "materials")
+        if m == matrix:
+            raise ValueError(f"materials: a sphere cannot be of the matrix phase {matrix!r}")
+        if m not in phase_names:
+            phase_names.append(m)
+    mat_index = np.array([phase_names.index(m) for m in mats], dtype=np.int32)
+    return mats, phase_names, mat_index
+
+
 def periodic_pieces(mask: np.ndarray) -> int:
     """Face-connected pieces of the voxels ``mask`` in the periodic box (a piece that leaves
     the box on one face and enters on the opposite one counts once)."""
@@ -169,7 +229,7 @@ class Microstructure:
     @classmethod
     def from_labels(cls, material_ids: np.ndarray, particle_ids: np.ndarray, voxel_m: float,
                     names: Sequence[str], particles: ParticleTable | None = None
-                    ) -> "Microstructure":
+                    ) -> Microstructure:
         """Build from plain label arrays.
 
         Parameters
@@ -234,7 +294,7 @@ class Microstructure:
                      materials: Sequence[str] | str, box_m: float | Sequence[float],
                      shape: int | Sequence[int], matrix: str = "matrix", *,
                      contact: ContactFilm | None = None,
-                     progress: Callable[[float], object] | None = None) -> "Microstructure":
+                     progress: Callable[[float], object] | None = None) -> Microstructure:
         """Voxelize periodic spheres (minimum image) on a grid of cubic voxels.
 
         A voxel belongs to a sphere when its centre lies inside it; where spheres
@@ -262,49 +322,13 @@ class Microstructure:
             times at most; for a progress bar.
         """
         n = _shape3(shape)
-        box = np.broadcast_to(np.asarray(box_m, dtype=np.float64), (3,)).copy() \
-            if np.ndim(box_m) <= 1 and np.size(box_m) in (1, 3) else None
-        if box is None:
-            raise ValueError(f"box_m: expected a length or three lengths (m), got {box_m!r}")
-        for d in range(3):
-            _positive_length(box[d], "box_m")
-        hs = box / np.array(n)
-        h = float(hs[0])
-        if not np.allclose(hs, h, rtol=1e-9, atol=0.0):
-            raise ValueError(f"box_m/shape: voxels must be cubic, box {box.tolist()} m over "
-                             f"shape {n} gives edges {hs.tolist()}")
-        c = np.asarray(centers_m, dtype=np.float64)
-        r = np.asarray(radii_m, dtype=np.float64)
-        if c.ndim != 2 or c.shape[1] != 3:
-            raise ValueError(f"centers_m: expected shape (P, 3), got {c.shape}")
-        if r.shape != (c.shape[0],):
-            raise ValueError(f"radii_m: expected shape ({c.shape[0]},), got {r.shape}")
-        if not (np.all(np.isfinite(c)) and np.all(np.isfinite(r))):
-            raise ValueError("centers_m/radii_m: NaN or inf in the sphere table")
-        if np.any(r <= 0):
-            raise ValueError("radii_m: every radius must be > 0 (m)")
-        if r.size and np.any(2 * r >= box.min()):
-            raise ValueError(f"radii_m: a sphere of diameter {2 * r.max():.4g} m does not fit the "
-                             f"periodic box {box.min():.4g} m")
-        if isinstance(materials, str):
-            mats = np.array([materials] * c.shape[0], dtype=object)
-        else:
-            mats = np.asarray(list(materials), dtype=object)
-            if mats.shape != (c.shape[0],):
-                raise ValueError(f"materials: expected {c.shape[0]} names, got {mats.shape}")
-        phase_name(matrix, "matrix")
+        box, h = _cubic_grid(box_m, n)
+        c, r = _sphere_table(centers_m, radii_m, box)
+        mats, phase_names, mat_index = _sphere_phases(materials, matrix, c.shape[0])
         if contact is None:
             contact = ContactFilm()
         elif not isinstance(contact, ContactFilm):
             raise ValueError(f"contact: expected a ContactFilm, got {type(contact).__name__}")
-        phase_names = [matrix]
-        for m in mats:
-            phase_name(m, "materials")
-            if m == matrix:
-                raise ValueError(f"materials: a sphere cannot be of the matrix phase {matrix!r}")
-            if m not in phase_names:
-                phase_names.append(m)
-        mat_index = np.array([phase_names.index(m) for m in mats], dtype=np.int32)
         c = np.mod(c, box)
         pid = _voxelize_spheres(c, r, n, h, progress=progress)
         lut = np.concatenate([[0], mat_index]).astype(np.int32)
@@ -314,7 +338,7 @@ class Microstructure:
         table = ParticleTable(c, r, np.asarray(mats, dtype=str), contact)
         return cls(mid, pid, h, tuple(phase_names), table)
 
-    def with_film(self, film_m: float) -> "Microstructure":
+    def with_film(self, film_m: float) -> Microstructure:
         """The same voxels and spheres, touching pairs meeting at the film ``film_m`` (m).
 
         The pairs that touch are the packer's (:attr:`ParticleTable.contact`); the voxel

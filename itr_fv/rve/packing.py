@@ -47,8 +47,15 @@ import numpy as np
 
 from ..numba_cache import njit
 
-__all__ = ["PackingResult", "pack_spheres", "pairs_within_gap", "check_overlaps",
-           "progress_fraction", "SLICE_WORK", "SEARCH_WORK"]
+__all__ = [
+    "SEARCH_WORK",
+    "SLICE_WORK",
+    "PackingResult",
+    "check_overlaps",
+    "pack_spheres",
+    "pairs_within_gap",
+    "progress_fraction",
+]
 
 #: Work of one call of the sweep kernel between two returns to Python, in pair visits (a
 #: sweep costs its listed pairs plus :data:`PARTICLE_WORK` per particle; at least one sweep
@@ -122,8 +129,7 @@ def _search_grid(pos, R, L, extra):
     n = pos.shape[0]
     rmax = 0.0
     for i in range(n):
-        if R[i] > rmax:
-            rmax = R[i]
+        rmax = max(rmax, R[i])
     rmean = 0.0
     for i in range(n):
         rmean += R[i]
@@ -196,16 +202,130 @@ def _pack_start(pos, R, L, s_start):
     return vol, Rs
 
 
-@njit()
-def _pack_sweeps(pos, R, L, vol, Rs, disp, acc, pi, pj, real, count, rmax, s_end, alpha,
-                 tol_final, grow_tol, max_iter, skin, budget):
-    """Growth + collective rearrangement, resumable: Jacobi sweeps from the state in the
-    arguments, which are updated in place.
+class _SweepSettings(NamedTuple):
+    """The constants of one packing, passed whole to the sweep kernel (lengths in the unit
+    of the box; numba takes the named tuple as it is).
 
-    Sweeps until the final tolerance is met (``count[_DONE] = 1``), ``max_iter`` sweeps are
-    done in all, this call has done ``budget`` pair visits (a sweep costs its listed pairs
-    plus :data:`PARTICLE_WORK` per particle), or the neighbour list must be rebuilt: then
-    ``Rs`` holds the radii at the current scale, ``acc`` is cleared and
+    Attributes
+    ----------
+    box : float
+        Edge of the periodic cube.
+    s_start, s_end : float
+        Scale of the radii at the start and at the end of the growth (``1 + inflate``).
+    alpha : float
+        Fraction of a pair's overlap removed per sweep.
+    tol_final : float
+        Largest relative overlap at ``s_end`` that ends the packing (``inflate / 2``).
+    grow_tol : float
+        The scale grows only while the largest relative overlap is below this.
+    max_iter : int
+        Sweep limit.
+    skin : float
+        Verlet-list margin beyond the contact distance.
+    rmax : float
+        Largest radius (with half the minimum gap).
+    """
+
+    box: float
+    s_start: float
+    s_end: float
+    alpha: float
+    tol_final: float
+    grow_tol: float
+    max_iter: int
+    skin: float
+    rmax: float
+
+
+@njit()
+def _jacobi_sweep(pos, R, vol, disp, pi, pj, npair, s, L, alpha):
+    """One Jacobi sweep at scale ``s``: the pushes of all overlapping listed pairs, summed
+    into ``disp`` (cleared first); returns the largest relative overlap."""
+    n = pos.shape[0]
+    half = 0.5 * L
+    for i in range(n):
+        disp[i, 0] = 0.0
+        disp[i, 1] = 0.0
+        disp[i, 2] = 0.0
+    maxrel = 0.0
+    for p in range(npair):
+        i = pi[p]
+        j = pj[p]
+        dx = _min_image(pos[j, 0] - pos[i, 0], L, half)
+        dy = _min_image(pos[j, 1] - pos[i, 1], L, half)
+        dz = _min_image(pos[j, 2] - pos[i, 2], L, half)
+        sig = s * (R[i] + R[j])
+        d2 = dx * dx + dy * dy + dz * dz
+        if d2 >= sig * sig:
+            continue
+        d = math.sqrt(d2)
+        ov = sig - d
+        rel = ov / sig
+        maxrel = max(maxrel, rel)
+        if d > 1e-12 * sig:
+            ux = dx / d
+            uy = dy / d
+            uz = dz / d
+        else:  # coincident centres: any direction, deterministic
+            ux = 1.0
+            uy = 0.0
+            uz = 0.0
+        wsum = vol[i] + vol[j]
+        wi = vol[j] / wsum  # i moves by the share of the other's volume
+        wj = vol[i] / wsum
+        m = alpha * ov
+        disp[i, 0] -= m * wi * ux
+        disp[i, 1] -= m * wi * uy
+        disp[i, 2] -= m * wi * uz
+        disp[j, 0] += m * wj * ux
+        disp[j, 1] += m * wj * uy
+        disp[j, 2] += m * wj * uz
+    return maxrel
+
+
+@njit()
+def _move(pos, disp, acc, L):
+    """Move every particle by its ``disp`` (wrapped into the box), add the distance to
+    ``acc``; returns the largest accumulated distance."""
+    n = pos.shape[0]
+    dmax = 0.0
+    for i in range(n):
+        ddx = disp[i, 0]
+        ddy = disp[i, 1]
+        ddz = disp[i, 2]
+        if ddx != 0.0 or ddy != 0.0 or ddz != 0.0:
+            pos[i, 0] += ddx
+            pos[i, 1] += ddy
+            pos[i, 2] += ddz
+            acc[i] += math.sqrt(ddx * ddx + ddy * ddy + ddz * ddz)
+        dmax = max(dmax, acc[i])
+    _wrap(pos, L)
+    return dmax
+
+
+@njit()
+def _grown(s, growth, maxrel, sweep):
+    """``(s, growth)`` after a sweep below full scale: the scale grows while the largest
+    relative overlap ``maxrel`` is below ``grow_tol``; the rate adapts (faster while the
+    overlaps stay small, slower when they build up)."""
+    if maxrel < sweep.grow_tol:
+        s = min(sweep.s_end, s * (1.0 + growth))
+        if maxrel < 0.25 * sweep.grow_tol:
+            growth = min(growth * 1.2, 0.02)
+    else:
+        growth = max(growth * 0.7, 1e-5)
+    return s, growth
+
+
+@njit()
+def _pack_sweeps(pos, R, vol, Rs, disp, acc, pi, pj, real, count, sweep, budget):
+    """Growth + collective rearrangement, resumable: Jacobi sweeps from the state in the
+    arguments, which are updated in place (``sweep``: the packing's :class:`_SweepSettings`).
+
+    Sweeps until the final tolerance is met (``count[_DONE] = 1``), ``sweep.max_iter``
+    sweeps are done in all, this call has done ``budget`` pair visits (a sweep costs its
+    listed pairs plus :data:`PARTICLE_WORK` per particle), or the neighbour list must be
+    rebuilt: then ``Rs`` holds the radii at the current scale, ``acc`` is cleared and
     ``count[_STALE] = 1``; the caller builds the list (:func:`_neighbour_list`) and resumes.
     """
     n = pos.shape[0]
@@ -215,82 +335,22 @@ def _pack_sweeps(pos, R, L, vol, Rs, disp, acc, pi, pj, real, count, rmax, s_end
     maxrel = real[_MAXREL]
     it = count[_IT]
     npair = count[_NPAIR]
-    half = 0.5 * L
     work = 0
     done = 0
     stale = 0
-    while it < max_iter and work < budget:
+    while it < sweep.max_iter and work < budget:
         it += 1
         work += npair + PARTICLE_WORK * n
-        # ------------------------------------------------ one Jacobi sweep at scale s
-        for i in range(n):
-            disp[i, 0] = 0.0
-            disp[i, 1] = 0.0
-            disp[i, 2] = 0.0
-        maxrel = 0.0
-        for p in range(npair):
-            i = pi[p]
-            j = pj[p]
-            dx = _min_image(pos[j, 0] - pos[i, 0], L, half)
-            dy = _min_image(pos[j, 1] - pos[i, 1], L, half)
-            dz = _min_image(pos[j, 2] - pos[i, 2], L, half)
-            sig = s * (R[i] + R[j])
-            d2 = dx * dx + dy * dy + dz * dz
-            if d2 >= sig * sig:
-                continue
-            d = math.sqrt(d2)
-            ov = sig - d
-            rel = ov / sig
-            if rel > maxrel:
-                maxrel = rel
-            if d > 1e-12 * sig:
-                ux = dx / d
-                uy = dy / d
-                uz = dz / d
-            else:  # coincident centres: any direction, deterministic
-                ux = 1.0
-                uy = 0.0
-                uz = 0.0
-            wsum = vol[i] + vol[j]
-            wi = vol[j] / wsum  # i moves by the share of the other's volume
-            wj = vol[i] / wsum
-            m = alpha * ov
-            disp[i, 0] -= m * wi * ux
-            disp[i, 1] -= m * wi * uy
-            disp[i, 2] -= m * wi * uz
-            disp[j, 0] += m * wj * ux
-            disp[j, 1] += m * wj * uy
-            disp[j, 2] += m * wj * uz
-        at_end = s >= s_end
-        if at_end and maxrel < tol_final:
+        maxrel = _jacobi_sweep(pos, R, vol, disp, pi, pj, npair, s, sweep.box, sweep.alpha)
+        at_end = s >= sweep.s_end
+        if at_end and maxrel < sweep.tol_final:
             done = 1
             break
-        # ------------------------------------------------ move
-        dmax = 0.0
-        for i in range(n):
-            ddx = disp[i, 0]
-            ddy = disp[i, 1]
-            ddz = disp[i, 2]
-            if ddx != 0.0 or ddy != 0.0 or ddz != 0.0:
-                pos[i, 0] += ddx
-                pos[i, 1] += ddy
-                pos[i, 2] += ddz
-                acc[i] += math.sqrt(ddx * ddx + ddy * ddy + ddz * ddz)
-                if acc[i] > dmax:
-                    dmax = acc[i]
-            elif acc[i] > dmax:
-                dmax = acc[i]
-        _wrap(pos, L)
-        # ------------------------------------------------ grow
+        dmax = _move(pos, disp, acc, sweep.box)
         if not at_end:
-            if maxrel < grow_tol:
-                s = min(s_end, s * (1.0 + growth))
-                if maxrel < 0.25 * grow_tol:
-                    growth = min(growth * 1.2, 0.02)
-            else:
-                growth = max(growth * 0.7, 1e-5)
-        # ------------------------------------------------ list still valid?
-        if 2.0 * dmax + 2.0 * rmax * (s - s_build) > skin:
+            s, growth = _grown(s, growth, maxrel, sweep)
+        # the list stays valid while no unlisted pair can have come into contact
+        if 2.0 * dmax + 2.0 * sweep.rmax * (s - s_build) > sweep.skin:
             for i in range(n):
                 Rs[i] = R[i] * s
                 acc[i] = 0.0
@@ -366,19 +426,6 @@ def _neighbour_list(pos: np.ndarray, R: np.ndarray, L: float, extra: float,
     return pi, pj, int(cnt)
 
 
-class _SweepSettings(NamedTuple):
-    """The constant arguments of the sweep kernel (lengths in the unit of the box)."""
-
-    box: float
-    s_start: float
-    s_end: float
-    alpha: float
-    tol_final: float
-    grow_tol: float
-    max_iter: int
-    skin: float
-
-
 @dataclass
 class _PackState:
     """What the sweep kernel carries from one slice to the next.
@@ -386,8 +433,8 @@ class _PackState:
     ``pos`` (centres, moved in place), ``vol`` (weights R^3), ``rs`` (radii of the last
     list build), ``disp`` (displacements of one sweep), ``acc`` (displacements accumulated
     since the last list build), the Verlet list ``pi``/``pj`` (its first ``count[_NPAIR]``
-    entries), ``real`` = ``[s, growth, s_build, maxrel]``, ``count`` = ``[iterations,
-    builds, npair, done, stale]`` and the largest radius ``rmax``.
+    entries), ``real`` = ``[s, growth, s_build, maxrel]`` and ``count`` = ``[iterations,
+    builds, npair, done, stale]``.
     """
 
     pos: np.ndarray
@@ -399,7 +446,6 @@ class _PackState:
     pj: np.ndarray
     real: np.ndarray
     count: np.ndarray
-    rmax: float
 
     @property
     def finished(self) -> bool:
@@ -426,7 +472,7 @@ def _start(pos: np.ndarray, R: np.ndarray, sweep: _SweepSettings) -> _PackState:
     real = np.array([sweep.s_start, 1e-3, sweep.s_start, 0.0])
     state = _PackState(pos, vol, rs, np.zeros((n, 3)), np.zeros(n),
                        np.empty(cap, dtype=np.int64), np.empty(cap, dtype=np.int64), real,
-                       np.zeros(5, dtype=np.int64), float(R.max()))
+                       np.zeros(5, dtype=np.int64))
     _rebuild(state, R, sweep)
     return state
 
@@ -434,10 +480,8 @@ def _start(pos: np.ndarray, R: np.ndarray, sweep: _SweepSettings) -> _PackState:
 def _slice(state: _PackState, R: np.ndarray, sweep: _SweepSettings, budget: int) -> None:
     """At most ``budget`` pair visits of sweeps from ``state`` (updated in place), and the
     neighbour list when the sweeps made it stale."""
-    _pack_sweeps(state.pos, R, sweep.box, state.vol, state.rs, state.disp, state.acc,
-                 state.pi, state.pj, state.real, state.count, state.rmax, sweep.s_end,
-                 sweep.alpha, sweep.tol_final, sweep.grow_tol, sweep.max_iter, sweep.skin,
-                 budget)
+    _pack_sweeps(state.pos, R, state.vol, state.rs, state.disp, state.acc, state.pi,
+                 state.pj, state.real, state.count, sweep, budget)
     if state.count[_STALE]:
         _rebuild(state, R, sweep)
 
@@ -509,6 +553,30 @@ class PackingResult:
     seconds: float
 
 
+def _contact_radii(radii: np.ndarray, box: float, min_gap: float, inflate: float
+                   ) -> tuple[np.ndarray, float]:
+    """The packer's radii ``r + min_gap / 2`` and the box edge, checked (ValueError naming
+    the argument): radii finite and > 0, a box > 0, ``inflate`` > 0, ``min_gap`` >= 0, the
+    largest inflated diameter below half the box (the minimum-image pair search)."""
+    r = np.ascontiguousarray(radii, dtype=np.float64)
+    L = float(box)
+    if r.ndim != 1 or r.size == 0:
+        raise ValueError("radii: expected a non-empty 1-D array")
+    if not np.all(np.isfinite(r)) or np.any(r <= 0):
+        raise ValueError("radii: every radius must be finite and > 0")
+    if not (math.isfinite(L) and L > 0):
+        raise ValueError(f"box: must be finite and > 0, got {box!r}")
+    if not (inflate > 0):
+        raise ValueError(f"inflate: must be > 0, got {inflate!r}")
+    if min_gap < 0:
+        raise ValueError(f"min_gap: must be >= 0, got {min_gap!r}")
+    R = r + 0.5 * float(min_gap)
+    if 2.0 * R.max() * (1.0 + inflate) >= 0.5 * L:
+        raise ValueError("radii: the largest diameter (plus gap) must stay below half the box "
+                         "for the minimum-image pair search")
+    return R, L
+
+
 def pack_spheres(radii: np.ndarray, box: float, rng: np.random.Generator,
                  min_gap: float = 0.0, inflate: float = 1e-3, phi_start: float = 0.25,
                  alpha: float = 0.6, grow_tol: float = 0.02, max_iter: int = 200_000,
@@ -553,34 +621,20 @@ def pack_spheres(radii: np.ndarray, box: float, rng: np.random.Generator,
     PackingResult
     """
     t0 = time.perf_counter()
-    r = np.ascontiguousarray(radii, dtype=np.float64)
-    L = float(box)
-    if r.ndim != 1 or r.size == 0:
-        raise ValueError("radii: expected a non-empty 1-D array")
-    if not np.all(np.isfinite(r)) or np.any(r <= 0):
-        raise ValueError("radii: every radius must be finite and > 0")
-    if not (math.isfinite(L) and L > 0):
-        raise ValueError(f"box: must be finite and > 0, got {box!r}")
-    if not (inflate > 0):
-        raise ValueError(f"inflate: must be > 0, got {inflate!r}")
-    if min_gap < 0:
-        raise ValueError(f"min_gap: must be >= 0, got {min_gap!r}")
-    R = r + 0.5 * float(min_gap)
-    if 2.0 * R.max() * (1.0 + inflate) >= 0.5 * L:
-        raise ValueError("radii: the largest diameter (plus gap) must stay below half the box "
-                         "for the minimum-image pair search")
+    R, L = _contact_radii(radii, box, min_gap, inflate)
     phi_full = 4.0 / 3.0 * math.pi * float(np.sum(R ** 3)) / L ** 3
     s_end = 1.0 + float(inflate)
     s_start = min(s_end, (phi_start / phi_full) ** (1.0 / 3.0)) if phi_full > 0 else s_end
     if centers is None:
-        pos = rng.uniform(0.0, L, size=(r.size, 3))
+        pos = rng.uniform(0.0, L, size=(R.size, 3))
     else:
         pos = np.array(centers, dtype=np.float64, copy=True)
-        if pos.shape != (r.size, 3):
-            raise ValueError(f"centers: expected shape ({r.size}, 3), got {pos.shape}")
+        if pos.shape != (R.size, 3):
+            raise ValueError(f"centers: expected shape ({R.size}, 3), got {pos.shape}")
     pos = np.ascontiguousarray(pos)
     sweep = _SweepSettings(L, s_start, s_end, float(alpha), 0.5 * float(inflate),
-                           float(grow_tol), int(max_iter), 0.3 * float(np.mean(R)))
+                           float(grow_tol), int(max_iter), 0.3 * float(np.mean(R)),
+                           float(R.max()))
     state = _start(pos, R, sweep)
     _run(state, R, sweep, progress)
     s, maxrel = float(state.real[_S]), float(state.real[_MAXREL])
@@ -638,6 +692,6 @@ def check_overlaps(centers: np.ndarray, radii: np.ndarray, box: float,
         Smallest surface gap among near pairs (``inf`` when no pair is within the search
         distance ``max(min_gap, 0) + 1e-9 box``).
     """
-    i, j, g = pairs_within_gap(centers, radii, box, max(min_gap, 0.0) + 1e-9 * box)
+    _, _, g = pairs_within_gap(centers, radii, box, max(min_gap, 0.0) + 1e-9 * box)
     n_bad = int(np.count_nonzero(g < min_gap))
     return n_bad, (float(g.min()) if g.size else math.inf)

@@ -230,7 +230,7 @@ class RVESpec:
             raise ValueError(f"replica: expected a whole number >= 0, got {replica!r}")
         return [self.seed + replica + SEED_STRIDE * a for a in range(PACKING_ATTEMPTS)]
 
-    def with_(self, **changes: Any) -> "RVESpec":
+    def with_(self, **changes: Any) -> RVESpec:
         """A copy with ``changes`` (checked again)."""
         return replace(self, **changes)
 
@@ -245,7 +245,7 @@ class RVESpec:
         return d
 
     @classmethod
-    def from_dict(cls, data: dict[str, Any]) -> "RVESpec":
+    def from_dict(cls, data: dict[str, Any]) -> RVESpec:
         """The spec of :meth:`to_dict`'s form (unknown keys: ValueError naming the key)."""
         unknown = unknown_key(data, cls.field_names(), detail=" of an RVE specification")
         if unknown:
