@@ -1,5 +1,6 @@
 """The headline of an identification: flags per parameter and the parametrisation to quote."""
 
+import dataclasses
 import json
 
 import numpy as np
@@ -223,7 +224,7 @@ def test_identifiability_sentences_agree_with_the_flags(no_budget):
             ia = _identifiability(names, post.samples[:, cols], PRIOR)
             ia = {"system": system, **ia, **_statement(post, names, ia["directions"])}
             stages.append(StageResult((system,), (), names, (), 0.0, 0.0, ia))
-        post.stages = stages
+        ident.posterior = dataclasses.replace(post, stages=stages)
         for st in stages:
             flags = [head["parameters"][par][n]["flag"] for n in st.parameters]
             every = "every parameter and combination is determined" in \

@@ -10,6 +10,7 @@ linear in log10 R, as in tests/test_posterior_stages.py).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import warnings
 
@@ -82,13 +83,28 @@ def test_the_marginal_interval_holds_the_nominal_one(models):
         lo, hi = marg.interval(n)
         assert lo <= lo0 * 1.02 and hi >= hi0 / 1.02
         assert math.log10(hi / lo) > 1.3 * math.log10(hi0 / lo0)
-        shares = rec["parameters"][n]["shares"]
+        shares = rec.parameters[n]["shares"]
         assert shares["k_silicone"] > 0.3                       # the matrix dominates
         assert sum(shares.values()) == pytest.approx(1.0, abs=1e-9)
         # knowing the matrix exactly narrows it most, to about the nominal interval
-        first = narrowing(rec, n)[0]
+        first = narrowing(rec.to_dict(), n)[0]
         assert first["input"] == "k_silicone"
         assert first["factor"] < math.sqrt(hi / lo)
+
+
+def test_the_marginal_posterior_and_its_record_are_frozen(models):
+    """Issue 62: the marginal posterior is made whole (its best values its central point),
+    not changed after it is made; the record is frozen, its JSON form a copy."""
+    _, marg, rec = run(models, measured(models), priors())
+    assert marg.best == marg.central()
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        marg.best = {}
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        rec.nodes = 1
+    d = rec.to_dict()
+    assert list(d) == ["inputs", "nodes", "parameters", "node_weights"]
+    d["parameters"].clear()
+    assert rec.parameters
 
 
 def test_an_input_stated_with_a_small_sd_gives_the_nominal_interval_back(models):
@@ -190,8 +206,8 @@ def test_a_truth_at_a_3nm_film_is_inside_the_interval_with_the_film_marginalised
                             elasticity=elastic, grid_points=41, n_samples=2000)
     assert_marginal_holds_where_nominal_misses(nominal, marg)
     for n in nominal.names:
-        assert rec["parameters"][n]["shares"]["film_nm"] > 0.2
-    assert rec["inputs"]["film_nm"] == {"low_nm": 0.0, "high_nm": 5.0}
+        assert rec.parameters[n]["shares"]["film_nm"] > 0.2
+    assert rec.inputs["film_nm"] == {"low_nm": 0.0, "high_nm": 5.0}
 
 
 def test_a_film_prior_without_the_film_elasticity_or_with_a_bad_range_is_refused(models):

@@ -52,9 +52,22 @@ from ..forward.model import ForwardModel
 from .marginal import Marginal
 from .measurements import Measurements
 
-__all__ = ["Stage", "StageResult", "Posterior", "stages_of", "calibrate", "pooled_scatter",
-           "variance", "residuals", "log_likelihood", "credible_interval", "UNIDENTIFIED_RATIO",
-           "EDGE_FACTOR", "UNDETERMINED_DECADES", "DETERMINATIONS"]
+__all__ = [
+    "DETERMINATIONS",
+    "EDGE_FACTOR",
+    "UNDETERMINED_DECADES",
+    "UNIDENTIFIED_RATIO",
+    "Posterior",
+    "Stage",
+    "StageResult",
+    "calibrate",
+    "credible_interval",
+    "log_likelihood",
+    "pooled_scatter",
+    "residuals",
+    "stages_of",
+    "variance",
+]
 
 #: Depth (in log-likelihood) of the region that the second, refined grid covers.
 REFINE_DEPTH = 25.0
@@ -213,9 +226,10 @@ class StageResult:
         return out
 
 
-@dataclass
+@dataclass(frozen=True, eq=False)
 class Posterior:
-    """Calibrated parameters (flat names, m^2 K/W).
+    """Calibrated parameters (flat names, m^2 K/W), frozen: a changed posterior is a new
+    one (:func:`dataclasses.replace`).
 
     Attributes
     ----------
@@ -516,7 +530,7 @@ def _identifiability(names: Sequence[str], log_samples: np.ndarray,
     return {"directions": directions}
 
 
-def _statement(post: "Posterior", names: Sequence[str], directions: Sequence[dict]) -> dict:
+def _statement(post: Posterior, names: Sequence[str], directions: Sequence[dict]) -> dict:
     """Per parameter its :meth:`Posterior.determination` and the stage's statement, which
     says "every parameter and combination is determined" only where every parameter is
     determined (the headline's flags, the same rule) and every direction is."""
@@ -567,6 +581,42 @@ def calibrate(models: Mapping[str, ForwardModel], measurements: Measurements, *,
     -------
     Posterior
     """
+    prior = _checked_prior(models, measurements, grid_points=grid_points,
+                           model_form_sd=model_form_sd, prior=prior)
+    rng = np.random.default_rng(seed)
+    names: list[str] = []
+    samples = np.zeros((n_samples, 0))
+    best: dict[str, float] = {}
+    stages_out: list[StageResult] = []
+    log_evidence = 0.0
+    for stage in stages_of(models):
+        scatter = pooled_scatter([models[f] for f in stage.formulations])
+        if not stage.new:
+            # nothing new to identify: these formulations only test the earlier stages
+            result = _predicted_stage(models, stage, measurements, best, scatter=scatter,
+                                      model_form_sd=model_form_sd)
+            log_evidence += result.log_likelihood_best
+            stages_out.append(result)
+            continue
+        fit = _calibrate_stage(models, stage, measurements, rng, samples=samples, best=best,
+                               known=names, scatter=scatter, prior=prior,
+                               grid_points=grid_points, carried_samples=carried_samples,
+                               n_samples=n_samples, model_form_sd=model_form_sd)
+        log_evidence += fit.log_evidence
+        samples = fit.samples
+        best.update(fit.best)
+        names += list(stage.new)
+        stages_out.append(fit.result)
+    post = Posterior(names, samples, best, tuple(prior), model_form_sd=float(model_form_sd),
+                     log_evidence=log_evidence)
+    return _with_statements(post, stages_out)
+
+
+def _checked_prior(models: Mapping[str, ForwardModel], measurements: Measurements, *,
+                   grid_points: int, model_form_sd: float,
+                   prior: tuple[float, float] | None) -> tuple[float, float]:
+    """The arguments of :func:`calibrate` checked (ValueError naming the one at fault) and
+    its prior range, m^2 K/W: ``prior``, or the models' reduced-basis box where None."""
     if not (isinstance(model_form_sd, (int, float)) and 0 <= model_form_sd < 1):
         raise ValueError(f"model_form_sd: expected a relative error in [0, 1), got "
                          f"{model_form_sd!r}")
@@ -578,103 +628,138 @@ def calibrate(models: Mapping[str, ForwardModel], measurements: Measurements, *,
                              f"measurement (measured: {measurements.formulations})")
     if not isinstance(grid_points, int) or grid_points < 5:
         raise ValueError(f"grid_points: expected a whole number >= 5, got {grid_points!r}")
-    rng = np.random.default_rng(seed)
     box = tuple(next(iter(models.values())).settings.prior_m2K_per_W)
     prior = box if prior is None else (float(prior[0]), float(prior[1]))
     if not (box[0] * (1 - 1e-12) <= prior[0] < prior[1] <= box[1] * (1 + 1e-12)):
         raise ValueError(f"prior: {prior[0]:g} - {prior[1]:g} m^2 K/W must lie inside the "
                          f"models' reduced-basis box {box[0]:g} - {box[1]:g}")
-    names: list[str] = []
-    samples = np.zeros((n_samples, 0))
-    best: dict[str, float] = {}
-    stages_out: list[StageResult] = []
-    log_evidence = 0.0
-    for stage in stages_of(models):
-        scatter = pooled_scatter([models[f] for f in stage.formulations])
-        if not stage.new:
-            # nothing new to identify: these formulations only test the earlier stages
-            at_best = {p: np.array([best[p]]) for p in names}
-            log_evidence += float(_stage_loglike(models, stage, measurements, at_best, scatter,
-                                                 model_form_sd)[0])
-            stages_out.append(StageResult(
-                system=tuple(stage.system), formulations=tuple(stage.formulations),
-                parameters=(), carried=tuple(stage.carried), rve_scatter=scatter,
-                log_likelihood_best=float(_stage_loglike(models, stage, measurements,
-                                                         at_best, scatter, model_form_sd)[0]),
-                identifiability={"system": "+".join(stage.system), "directions": [],
-                                 "statement": "no parameter of its own: predicted from "
-                                              "the earlier stages"}))
-            continue
-        if stage.carried:
-            pick = rng.choice(samples.shape[0], size=min(carried_samples, samples.shape[0]),
-                              replace=False)
-            prev = samples[pick]                                       # (s, known)
-        else:
-            prev = np.zeros((1, 0))
+    return prior
 
-        def evaluate(axes):
-            mesh = np.meshgrid(*axes, indexing="ij")
-            G = np.stack([m.ravel() for m in mesh], axis=1)          # (g, new)
-            columns = {}
-            for j, p in enumerate(names if stage.carried else []):
-                columns[p] = np.repeat(10 ** prev[:, j], G.shape[0])
-            for j, p in enumerate(stage.new):
-                columns[p] = np.tile(10 ** G[:, j], prev.shape[0])
-            ll = _stage_loglike(models, stage, measurements, columns, scatter, model_form_sd)
-            return G, ll.reshape(prev.shape[0], G.shape[0]), mesh[0].shape
 
-        # a grid over the prior, then the same number of points over the region that holds
-        # the posterior (log-likelihood within REFINE_DEPTH of its maximum, one cell added)
-        axes = [_grid(prior, grid_points)] * len(stage.new)
-        G, ll, shape = evaluate(axes)
-        keep = (ll.max(axis=0) > ll.max() - REFINE_DEPTH)
-        lo_p, hi_p = axes[0][0], axes[0][-1]
-        step0 = axes[0][1] - axes[0][0]
-        axes = [np.linspace(max(lo_p, G[keep, j].min() - step0),
-                            min(hi_p, G[keep, j].max() + step0), grid_points)
-                for j in range(len(stage.new))]
-        G, ll, shape = evaluate(axes)
-        steps = np.array([a[1] - a[0] for a in axes])
-        # the prior's mass of the refined cells: the likelihood beyond them is below
-        # exp(-REFINE_DEPTH) of its peak (averaged over the carried samples)
-        top = float(ll.max())
-        width = math.log10(prior[1]) - math.log10(prior[0])
-        log_evidence += (top + math.log(float(np.exp(ll - top).sum(axis=1).mean()))
-                         + float(np.sum(np.log(steps / width))))
-        S, g = ll.shape
-        w = np.exp(ll - ll.max())
-        pick = rng.choice(S * g, size=n_samples, p=(w / w.sum()).ravel())
-        si, gi = np.divmod(pick, g)
-        jitter = rng.uniform(-0.5, 0.5, size=(n_samples, len(stage.new))) * steps
-        new_samples = np.clip(G[gi] + jitter, [a[0] for a in axes], [a[-1] for a in axes])
-        if stage.carried:
-            samples = np.hstack([prev[si], new_samples])
-            # the best point: earlier stages' best values, this stage's grid
-            line = {p: np.full(g, best[p]) for p in names}
-            line.update({p: 10 ** G[:, j] for j, p in enumerate(stage.new)})
-            ll_best = _stage_loglike(models, stage, measurements, line, scatter,
-                                     model_form_sd)
-        else:
-            # independent of the earlier stages: pair the rows as they come
-            samples = np.hstack([samples, new_samples])
-            ll_best = ll[0]
-        bg = int(np.argmax(ll_best))
-        for j, p in enumerate(stage.new):
-            best[p] = float(10 ** G[bg, j])
-        names += list(stage.new)
-        marg = w.sum(axis=0).reshape(shape)
-        stages_out.append(StageResult(
-            system=tuple(stage.system), formulations=tuple(stage.formulations),
-            parameters=tuple(stage.new), carried=tuple(stage.carried),
-            rve_scatter=scatter, log_likelihood_best=float(ll_best[bg]),
-            identifiability={"system": "+".join(stage.system),
-                             **_identifiability(stage.new, new_samples, prior)},
-            axes_log10=tuple(np.array(a) for a in axes), density=marg / marg.sum()))
-    post = Posterior(names, samples, best, tuple(prior), model_form_sd=float(model_form_sd),
-                     log_evidence=log_evidence)
-    # the statements judge each parameter by the posterior's own intervals and flags
-    post.stages = [st if not st.parameters else dataclasses.replace(
-        st, identifiability={**st.identifiability, **_statement(
-            post, st.parameters, st.identifiability["directions"])})
-        for st in stages_out]
-    return post
+def _predicted_stage(models: Mapping[str, ForwardModel], stage: Stage,
+                     measurements: Measurements, best: Mapping[str, float], *,
+                     scatter: float, model_form_sd: float) -> StageResult:
+    """A stage with no parameter of its own: its formulations predicted at the earlier
+    stages' ``best`` values (m^2 K/W), their log-likelihood there (nats) its evidence."""
+    at_best = {p: np.array([best[p]]) for p in best}
+    ll = float(_stage_loglike(models, stage, measurements, at_best, scatter,
+                              model_form_sd)[0])
+    return StageResult(
+        system=tuple(stage.system), formulations=tuple(stage.formulations), parameters=(),
+        carried=tuple(stage.carried), rve_scatter=scatter, log_likelihood_best=ll,
+        identifiability={"system": "+".join(stage.system), "directions": [],
+                         "statement": "no parameter of its own: predicted from the earlier "
+                                      "stages"})
+
+
+@dataclass(frozen=True, eq=False)
+class _StageFit:
+    """What :func:`_calibrate_stage` adds to the posterior: the stage's result, every
+    stage's samples so far (log10 values, the new parameters' columns last), the new
+    parameters' best values (m^2 K/W) and the stage's log evidence (nats)."""
+
+    result: StageResult
+    samples: np.ndarray
+    best: dict[str, float]
+    log_evidence: float
+
+
+def _calibrate_stage(models: Mapping[str, ForwardModel], stage: Stage,
+                     measurements: Measurements, rng: np.random.Generator, *,
+                     samples: np.ndarray, best: Mapping[str, float], known: Sequence[str],
+                     scatter: float, prior: tuple[float, float], grid_points: int,
+                     carried_samples: int, n_samples: int,
+                     model_form_sd: float) -> _StageFit:
+    """One stage with parameters of its own (``stage.new``): a grid over the prior, then the
+    same number of points over the region that holds the posterior (log-likelihood within
+    :data:`REFINE_DEPTH` of its maximum, one cell added), each crossed with up to
+    ``carried_samples`` rows of the earlier stages' ``samples`` (columns ``known``)."""
+    if stage.carried:
+        pick = rng.choice(samples.shape[0], size=min(carried_samples, samples.shape[0]),
+                          replace=False)
+        prev = samples[pick]                                       # (s, known)
+    else:
+        prev = np.zeros((1, 0))
+    carried = list(known) if stage.carried else []
+    axes = [_grid(prior, grid_points)] * len(stage.new)
+    G, ll, shape = _stage_grid(models, stage, measurements, axes, prev, carried,
+                               scatter=scatter, model_form_sd=model_form_sd)
+    axes = _refined_axes(axes, G, ll, grid_points)
+    G, ll, shape = _stage_grid(models, stage, measurements, axes, prev, carried,
+                               scatter=scatter, model_form_sd=model_form_sd)
+    steps = np.array([a[1] - a[0] for a in axes])
+    # the prior's mass of the refined cells: the likelihood beyond them is below
+    # exp(-REFINE_DEPTH) of its peak (averaged over the carried samples)
+    top = float(ll.max())
+    width = math.log10(prior[1]) - math.log10(prior[0])
+    log_evidence = (top + math.log(float(np.exp(ll - top).sum(axis=1).mean()))
+                    + float(np.sum(np.log(steps / width))))
+    S, g = ll.shape
+    w = np.exp(ll - ll.max())
+    pick = rng.choice(S * g, size=n_samples, p=(w / w.sum()).ravel())
+    si, gi = np.divmod(pick, g)
+    jitter = rng.uniform(-0.5, 0.5, size=(n_samples, len(stage.new))) * steps
+    new_samples = np.clip(G[gi] + jitter, [a[0] for a in axes], [a[-1] for a in axes])
+    if stage.carried:
+        samples = np.hstack([prev[si], new_samples])
+        # the best point: earlier stages' best values, this stage's grid
+        line = {p: np.full(g, best[p]) for p in known}
+        line.update({p: 10 ** G[:, j] for j, p in enumerate(stage.new)})
+        ll_best = _stage_loglike(models, stage, measurements, line, scatter, model_form_sd)
+    else:
+        # independent of the earlier stages: pair the rows as they come
+        samples = np.hstack([samples, new_samples])
+        ll_best = ll[0]
+    bg = int(np.argmax(ll_best))
+    marg = w.sum(axis=0).reshape(shape)
+    result = StageResult(
+        system=tuple(stage.system), formulations=tuple(stage.formulations),
+        parameters=tuple(stage.new), carried=tuple(stage.carried), rve_scatter=scatter,
+        log_likelihood_best=float(ll_best[bg]),
+        identifiability={"system": "+".join(stage.system),
+                         **_identifiability(stage.new, new_samples, prior)},
+        axes_log10=tuple(np.array(a) for a in axes), density=marg / marg.sum())
+    return _StageFit(result, samples, {p: float(10 ** G[bg, j])
+                                       for j, p in enumerate(stage.new)}, log_evidence)
+
+
+def _stage_grid(models: Mapping[str, ForwardModel], stage: Stage, measurements: Measurements,
+                axes: Sequence[np.ndarray], prev: np.ndarray, carried: Sequence[str], *,
+                scatter: float, model_form_sd: float
+                ) -> tuple[np.ndarray, np.ndarray, tuple[int, ...]]:
+    """The stage's log-likelihood on the grid of ``axes`` (log10 of the new parameters)
+    crossed with the carried rows ``prev`` (log10 values of ``carried``): the grid points
+    (g, new), the log-likelihood (rows of ``prev``, g) and the grid's shape."""
+    mesh = np.meshgrid(*axes, indexing="ij")
+    G = np.stack([m.ravel() for m in mesh], axis=1)          # (g, new)
+    columns = {}
+    for j, p in enumerate(carried):
+        columns[p] = np.repeat(10 ** prev[:, j], G.shape[0])
+    for j, p in enumerate(stage.new):
+        columns[p] = np.tile(10 ** G[:, j], prev.shape[0])
+    ll = _stage_loglike(models, stage, measurements, columns, scatter, model_form_sd)
+    return G, ll.reshape(prev.shape[0], G.shape[0]), mesh[0].shape
+
+
+def _refined_axes(axes: Sequence[np.ndarray], G: np.ndarray, ll: np.ndarray,
+                  grid_points: int) -> list[np.ndarray]:
+    """Axes of ``grid_points`` each over the region of the grid ``G`` whose log-likelihood
+    ``ll`` (best over the carried rows) lies within :data:`REFINE_DEPTH` of its maximum,
+    one cell of the first grid added on each side, inside the first grid's range."""
+    keep = (ll.max(axis=0) > ll.max() - REFINE_DEPTH)
+    lo_p, hi_p = axes[0][0], axes[0][-1]
+    step0 = axes[0][1] - axes[0][0]
+    return [np.linspace(max(lo_p, G[keep, j].min() - step0),
+                        min(hi_p, G[keep, j].max() + step0), grid_points)
+            for j in range(len(axes))]
+
+
+def _with_statements(post: Posterior, stages: Sequence[StageResult]) -> Posterior:
+    """``post`` with ``stages``, each stage that identifies parameters with its statement
+    (:func:`_statement`): the statements judge each parameter by the posterior's own
+    intervals and flags."""
+    return dataclasses.replace(post, stages=[
+        st if not st.parameters else dataclasses.replace(
+            st, identifiability={**st.identifiability, **_statement(
+                post, st.parameters, st.identifiability["directions"])})
+        for st in stages])

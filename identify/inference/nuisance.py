@@ -48,10 +48,12 @@ shares and ``measurements`` sum to 1).
 
 from __future__ import annotations
 
+import copy
 import itertools
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
@@ -62,8 +64,18 @@ from ..forward.model import ForwardModel
 from .calibrate import Posterior, calibrate
 from .measurements import Measurements
 
-__all__ = ["InputPrior", "FilmPrior", "default_priors", "DEFAULT_FILM", "NODES", "ScaledModel",
-           "elasticities", "marginalise", "default_priors", "narrowing"]
+__all__ = [
+    "DEFAULT_FILM",
+    "NODES",
+    "FilmPrior",
+    "InputPrior",
+    "MarginalisationRecord",
+    "ScaledModel",
+    "default_priors",
+    "elasticities",
+    "marginalise",
+    "narrowing",
+]
 
 #: Gauss-Hermite nodes per input (the matrix first; a filler's conductivity, whose
 #: elasticity is small, takes :data:`FILLER_NODES`).
@@ -235,10 +247,44 @@ def _nodes(priors: Sequence[InputPrior | FilmPrior]) -> tuple[np.ndarray, np.nda
     return z, lw
 
 
+@dataclass(frozen=True)
+class MarginalisationRecord:
+    """What :func:`marginalise` found besides the posterior (frozen; :meth:`to_dict` is the
+    JSON-ready form that ``Identification.inputs`` holds).
+
+    Attributes
+    ----------
+    inputs : dict
+        Per input its prior: ``nominal`` (W/(m K)) and ``rel_sd`` of a conductivity,
+        ``low_nm`` and ``high_nm`` of a film.
+    nodes : int
+        Nodes of the quadrature (full calibrations).
+    parameters : dict
+        Per parameter: ``interval_nominal`` and ``interval_marginal`` (m^2 K/W, 90 %),
+        ``shares`` (each input's share of the variance of its log10 value, with
+        ``measurements``: they sum to 1) and ``if_known`` (per input, the 90 % interval
+        with that input known exactly, m^2 K/W).
+    node_weights : list of float
+        The nodes' posterior weights (summing to 1).
+    """
+
+    inputs: dict[str, dict[str, float]]
+    nodes: int
+    parameters: dict[str, dict]
+    node_weights: list[float]
+
+    def to_dict(self) -> dict:
+        """The record as JSON-ready data (a copy), in the order of the attributes."""
+        return copy.deepcopy({"inputs": self.inputs, "nodes": self.nodes,
+                              "parameters": self.parameters,
+                              "node_weights": self.node_weights})
+
+
 def marginalise(models: Mapping[str, ForwardModel], measurements: Measurements,
-                nominal: Posterior, priors: Mapping[str, InputPrior], *,
+                nominal: Posterior, priors: Mapping[str, InputPrior | FilmPrior], *,
                 elasticity: Mapping[str, Mapping[str, float]],
-                n_samples: int = 4000, seed: int = 0, **calibrate_kw) -> tuple[Posterior, dict]:
+                n_samples: int = 4000, seed: int = 0,
+                **calibrate_kw) -> tuple[Posterior, MarginalisationRecord]:
     """The posterior with the conductivities of ``priors`` integrated out.
 
     Parameters
@@ -254,16 +300,56 @@ def marginalise(models: Mapping[str, ForwardModel], measurements: Measurements,
     elasticity : mapping
         :func:`elasticities` of the models (with ``film_nm`` where the film is integrated
         out).
+    n_samples, seed : int
+        Samples of the marginal posterior drawn from the nodes, and their seed.
+    **calibrate_kw
+        Passed to every node's :func:`~itr_identify.inference.calibrate.calibrate` (its
+        ``grid_points`` at most :data:`NODE_GRID_POINTS` away from the nominal node).
 
     Returns
     -------
-    (Posterior, dict)
-        The marginal posterior and a record: per input its prior, per parameter the
-        interval at nominal inputs, the marginal one and each input's share of the
-        variance of its log10 value (``shares``, summing to 1 with ``measurements``), and
-        the nodes' weights.
+    (Posterior, MarginalisationRecord)
+        The marginal posterior (its best values its own central point) and the record:
+        per input its prior, per parameter the interval at nominal inputs, the marginal one
+        and each input's share of the variance of its log10 value, and the nodes' weights.
     """
     system = _system_of(models)
+    prs = _ordered_priors(priors, system, elasticity)
+    z, logw = _nodes(prs)
+    posts = [_node_posterior(models, measurements, nominal, prs, row, system=system,
+                             elasticity=elasticity, seed=seed, calibrate_kw=calibrate_kw)
+             for row in z]
+    lpw = np.array([lw + post.log_evidence for lw, post in zip(logw, posts)])
+    w = np.exp(lpw - lpw.max())
+    w /= w.sum()
+    rng = np.random.default_rng(seed)
+    names = nominal.names
+    samples = _mixture_draws(posts, w, names, rng, n_samples)
+    marginal = Posterior(list(names), samples, {}, nominal.prior, stages=nominal.stages,
+                         model_form_sd=nominal.model_form_sd,
+                         log_evidence=float(lpw.max() + math.log(np.exp(lpw - lpw.max()).sum())))
+    marginal = replace(marginal, best=marginal.central())
+    input_names = [pr.name for pr in prs]
+    record = MarginalisationRecord(
+        inputs={pr.name: ({"low_nm": pr.low_nm, "high_nm": pr.high_nm}
+                          if isinstance(pr, FilmPrior) else
+                          {"nominal": pr.nominal, "rel_sd": pr.rel_sd})
+                for pr in prs},
+        nodes=len(posts),
+        parameters={n: _parameter_record(n, posts, w, z, input_names, nominal=nominal,
+                                         marginal=marginal, seed=seed)
+                    for n in names},
+        node_weights=w.tolist())
+    return marginal, record
+
+
+def _ordered_priors(priors: Mapping[str, InputPrior | FilmPrior], system: MaterialSystem,
+                    elasticity: Mapping[str, Mapping[str, float]]
+                    ) -> list[InputPrior | FilmPrior]:
+    """The priors in quadrature order (the matrix's conductivity first, then the fillers',
+    the film last), checked against the models: a film needs every model's film
+    elasticity, a conductivity its nominal value the one the models were built at
+    (ValueError naming what is missing or off)."""
     k0 = system.conductivities()
     matrix = system.matrix
     order = sorted(priors, key=lambda n: (isinstance(priors[n], FilmPrior),
@@ -280,62 +366,68 @@ def marginalise(models: Mapping[str, ForwardModel], measurements: Measurements,
             raise ValueError(f"{pr.name}: the forward models were built at "
                              f"{float(k0[pr.phase]):g} W/(m K); a prior centred elsewhere "
                              f"({pr.nominal:g}) needs models built there")
-    z, logw = _nodes(prs)
-    posts, log_post_w = [], []
-    for row, lw in zip(z, logw):
-        value = {pr.name: _value(pr, x) for pr, x in zip(prs, row)}
-        lam = value.get(f"k_{matrix}", k0[matrix]) / k0[matrix]
-        mu = {pr.phase: value[pr.name] / pr.nominal for pr in prs
-              if isinstance(pr, InputPrior) and pr.phase != matrix}
-        film_nm = value.get("film_nm", 0.0)
-        if np.all(row == 0) and film_nm == 0:
-            post = nominal
-        else:
-            scaled = {f: ScaledModel(m, lam, mu, elasticity.get(f, {}), film_nm)
-                      for f, m in models.items()}
-            kw = {**calibrate_kw, "grid_points": min(calibrate_kw.get("grid_points", 121),
-                                                     NODE_GRID_POINTS)}
-            post = calibrate(scaled, measurements, model_form_sd=nominal.model_form_sd,
-                             seed=seed, **kw)
-        posts.append(post)
-        log_post_w.append(lw + post.log_evidence)
-    lpw = np.array(log_post_w)
-    w = np.exp(lpw - lpw.max())
-    w /= w.sum()
-    rng = np.random.default_rng(seed)
+    return prs
+
+
+def _node_posterior(models: Mapping[str, ForwardModel], measurements: Measurements,
+                    nominal: Posterior, prs: Sequence[InputPrior | FilmPrior],
+                    row: np.ndarray, *, system: MaterialSystem,
+                    elasticity: Mapping[str, Mapping[str, float]], seed: int,
+                    calibrate_kw: Mapping[str, Any]) -> Posterior:
+    """The calibration at one node ``row`` of the quadrature (standardised inputs, in the
+    order of ``prs``): ``nominal`` itself at the nominal node, else the models scaled to
+    the node's inputs (:class:`ScaledModel`) calibrated on at most
+    :data:`NODE_GRID_POINTS` points per parameter."""
+    k0 = system.conductivities()
+    matrix = system.matrix
+    value = {pr.name: _value(pr, x) for pr, x in zip(prs, row)}
+    lam = value.get(f"k_{matrix}", k0[matrix]) / k0[matrix]
+    mu = {pr.phase: value[pr.name] / pr.nominal for pr in prs
+          if isinstance(pr, InputPrior) and pr.phase != matrix}
+    film_nm = value.get("film_nm", 0.0)
+    if np.all(row == 0) and film_nm == 0:
+        return nominal
+    scaled = {f: ScaledModel(m, lam, mu, elasticity.get(f, {}), film_nm)
+              for f, m in models.items()}
+    kw = {**calibrate_kw, "grid_points": min(calibrate_kw.get("grid_points", 121),
+                                             NODE_GRID_POINTS)}
+    return calibrate(scaled, measurements, model_form_sd=nominal.model_form_sd, seed=seed,
+                     **kw)
+
+
+def _mixture_draws(posts: Sequence[Posterior], w: np.ndarray, names: Sequence[str],
+                   rng: np.random.Generator, n_samples: int) -> np.ndarray:
+    """``n_samples`` draws (log10 values, columns ``names``) of the mixture of the nodes'
+    posteriors ``posts`` weighted ``w``: a node per draw by weight, then as many of its
+    samples at random."""
     pick = rng.choice(len(posts), size=n_samples, p=w)
-    names = nominal.names
     cols = [[p.names.index(n) for n in names] for p in posts]
-    samples = np.vstack([posts[j].samples[rng.integers(0, posts[j].samples.shape[0],
-                                                        int(np.sum(pick == j))), :][:, cols[j]]
-                         for j in range(len(posts)) if np.any(pick == j)])
-    marginal = Posterior(list(names), samples, {}, nominal.prior, stages=nominal.stages,
-                         model_form_sd=nominal.model_form_sd,
-                         log_evidence=float(lpw.max() + math.log(np.exp(lpw - lpw.max()).sum())))
-    marginal.best = marginal.central()
-    record = {"inputs": {pr.name: ({"low_nm": pr.low_nm, "high_nm": pr.high_nm}
-                                   if isinstance(pr, FilmPrior) else
-                                   {"nominal": pr.nominal, "rel_sd": pr.rel_sd})
-                         for pr in prs},
-              "nodes": len(posts), "parameters": {}}
-    input_names = [pr.name for pr in prs]
-    for n in names:
-        means = np.array([float(np.mean(p.samples[:, p.names.index(n)])) for p in posts])
-        within = np.array([float(np.var(p.samples[:, p.names.index(n)])) for p in posts])
-        total = float(np.sum(w * (within + (means - np.sum(w * means)) ** 2)))
-        shares = _shares(z, w, means, total, [pr.name for pr in prs])
-        measured = float(np.sum(w * within)) / total if total > 0 else 1.0
-        explained = sum(shares.values())
-        if explained > 0:   # the inputs' part is the between-node variance: 1 - measured
-            shares = {k: v * (1.0 - measured) / explained for k, v in shares.items()}
-        shares["measurements"] = measured
-        if_known = {name: _mixture_interval(posts, w * (z[:, i] == 0), n, nominal, seed)
-                    for i, name in enumerate(input_names)}
-        record["parameters"][n] = {"interval_nominal": list(nominal.interval(n)),
-                                   "interval_marginal": list(marginal.interval(n)),
-                                   "shares": shares, "if_known": if_known}
-    record["node_weights"] = w.tolist()
-    return marginal, record
+    return np.vstack([posts[j].samples[rng.integers(0, posts[j].samples.shape[0],
+                                                     int(np.sum(pick == j))), :][:, cols[j]]
+                      for j in range(len(posts)) if np.any(pick == j)])
+
+
+def _parameter_record(name: str, posts: Sequence[Posterior], w: np.ndarray, z: np.ndarray,
+                      input_names: Sequence[str], *, nominal: Posterior, marginal: Posterior,
+                      seed: int) -> dict:
+    """One parameter's entry of :attr:`MarginalisationRecord.parameters`: its nominal and
+    marginal intervals, the variance shares (the inputs' part scaled to the between-node
+    variance, ``measurements`` the within-node part) and the interval with each input
+    known."""
+    means = np.array([float(np.mean(p.samples[:, p.names.index(name)])) for p in posts])
+    within = np.array([float(np.var(p.samples[:, p.names.index(name)])) for p in posts])
+    total = float(np.sum(w * (within + (means - np.sum(w * means)) ** 2)))
+    shares = _shares(z, w, means, total, list(input_names))
+    measured = float(np.sum(w * within)) / total if total > 0 else 1.0
+    explained = sum(shares.values())
+    if explained > 0:   # the inputs' part is the between-node variance: 1 - measured
+        shares = {k: v * (1.0 - measured) / explained for k, v in shares.items()}
+    shares["measurements"] = measured
+    if_known = {n: _mixture_interval(posts, w * (z[:, i] == 0), name, nominal, seed)
+                for i, n in enumerate(input_names)}
+    return {"interval_nominal": list(nominal.interval(name)),
+            "interval_marginal": list(marginal.interval(name)),
+            "shares": shares, "if_known": if_known}
 
 
 def _value(prior: InputPrior | FilmPrior, x: float) -> float:

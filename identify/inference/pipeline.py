@@ -342,9 +342,9 @@ def identify(measurements: Measurements, parametrisation: str = "gap", *,
              "solve per filler" + (" and one at a film" if film else "")
              + " and formulation for its elasticity)")
         elastic = elasticities(models, post.best, film=film)
-        post, inputs_record = marginalise(models, measurements, post, priors,
-                                          elasticity=elastic, **cal)
-        inputs_record["elasticity"] = elastic
+        post, record = marginalise(models, measurements, post, priors,
+                                   elasticity=elastic, **cal)
+        inputs_record = {**record.to_dict(), "elasticity": elastic}
         seconds["conductivities marginalised"] = time.perf_counter() - t
     alone = fit_alone(models, measurements, **cal)
     t = time.perf_counter()
