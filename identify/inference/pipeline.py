@@ -29,7 +29,7 @@ import numpy as np
 from itr_fv.io import counted
 from itr_surrogate.engine import SolveEngine
 
-from ..forward.model import PARAMETRISATIONS, ForwardModel, ForwardSettings
+from ..forward.model import PARAMETRISATIONS, ForwardModel, ForwardSettings, Parametrisation
 from .alone import fit_alone
 from .calibrate import Posterior, calibrate
 from .formulations import fractions_of
@@ -58,8 +58,14 @@ from .nuisance import (
 from .priors import DEFAULT_MODEL_FORM, DEFAULT_RESISTANCE, ModelFormPrior, ResistancePrior
 from .screen import ScreenResult, hierarchical_screen
 
-__all__ = ["Identification", "identify", "default_inputs", "marginalised_inputs",
-           "film_is_zero", "CARRIED_DRAWS"]
+__all__ = [
+    "CARRIED_DRAWS",
+    "Identification",
+    "default_inputs",
+    "film_is_zero",
+    "identify",
+    "marginalised_inputs",
+]
 
 #: Draws of the earlier stages' posterior whose spread a later stage's likelihood carries.
 CARRIED_DRAWS = 6
@@ -218,6 +224,79 @@ def identify(measurements: Measurements, parametrisation: str = "gap", *,
         With ``joint``: how the point and interval move when the resistance prior's floor
         moves a decade (one more, shorter run; :func:`~.joint_fit.floor_sensitivity`).
     """
+    par, settings = _checked_arguments(parametrisation, settings, resistance)
+    system = settings.system
+    comps = {f: fractions_of(f, system) for f in measurements.formulations}
+    priors = marginalised_inputs(
+        default_inputs(sorted({system.matrix, *(x for f in comps.values() for x in f)}),
+                       settings)
+        if inputs is None else inputs, contact=par.contact, settings=settings)
+    # every grid calibration (at the nominal inputs, alone, per input node) over the one
+    # resistance prior that the joint posterior also has
+    run = _Run(parametrisation, par, settings, measurements, comps,
+               cal={"grid_points": grid_points, "seed": seed,
+                    "prior": (resistance.low, resistance.high)},
+               faithful=settings.faithful if par.name == "gap" else None, progress=progress,
+               echo=echo, engine=engine)
+    models, post, seconds = _single_filler_stage(run, reuse)
+    post, more = _two_filler_stage(run, models, post,
+                                   vary_both=joint and par.contact == "gap")
+    seconds.update(more)
+    if joint:
+        return _joint_identification(run, models, post, priors, seconds,
+                                     resistance=resistance, model_form=model_form,
+                                     floor_check=floor_check)
+    return _quadrature_identification(run, models, post, priors, seconds)
+
+
+@dataclass(frozen=True, eq=False)
+class _Run:
+    """What every stage of :func:`identify` reads: its arguments, the formulations'
+    compositions, the grid calibrations' keywords (``cal``: grid points, seed, prior), the
+    faithful level of runtime corrections (None under the area parametrisation) and the
+    correction rounds so far (``rounds``, which :func:`_corrected` appends to)."""
+
+    parametrisation: str
+    par: Parametrisation
+    settings: ForwardSettings
+    measurements: Measurements
+    comps: dict[str, dict[str, float]]
+    cal: dict[str, Any]
+    faithful: Any
+    progress: bool
+    echo: Callable[[str], None]
+    engine: SolveEngine | None
+    rounds: list[dict] = field(default_factory=list)
+
+    @property
+    def singles(self) -> list[str]:
+        """The single-filler formulations, in measurement order."""
+        return [f for f in self.comps if len(self.comps[f]) == 1]
+
+    @property
+    def multis(self) -> list[str]:
+        """The formulations of two fillers or more, in measurement order."""
+        return [f for f in self.comps if len(self.comps[f]) > 1]
+
+    def build(self, fixed_of: Mapping[str, dict[str, float]]) -> dict[str, ForwardModel]:
+        """The models of ``fixed_of`` (formulation -> parameters held), built
+        (:func:`_build_all`)."""
+        return _build_all(fixed_of, self.comps, self.par, self.settings, self.progress,
+                          self.echo, self.engine)
+
+    def corrected(self, models: dict[str, ForwardModel], names: list[str],
+                  post: Posterior) -> Posterior:
+        """:func:`_corrected` of the models ``names`` that carry no shipped correction."""
+        return _corrected(models, _runtime(models, names, self.echo), self.measurements,
+                          post, self.faithful, self.cal, self.rounds, self.echo)
+
+
+def _checked_arguments(parametrisation: str, settings: ForwardSettings | None,
+                       resistance: ResistancePrior
+                       ) -> tuple[Parametrisation, ForwardSettings]:
+    """The parametrisation named and the settings (default ``ForwardSettings()``);
+    ValueError for an unknown parametrisation or a resistance prior beyond the settings'
+    reduced-basis box."""
     if parametrisation not in PARAMETRISATIONS:
         raise ValueError(f"parametrisation: expected one of {sorted(PARAMETRISATIONS)}, got "
                          f"{parametrisation!r}")
@@ -227,28 +306,24 @@ def identify(measurements: Measurements, parametrisation: str = "gap", *,
         raise ValueError(f"resistance: the prior {resistance.low:g} - {resistance.high:g} "
                          f"m^2 K/W reaches beyond the reduced bases' box {lo:g} - {hi:g} "
                          "(settings.prior_m2K_per_W)")
-    par = PARAMETRISATIONS[parametrisation]
-    system = settings.system
-    comps = {f: fractions_of(f, system) for f in measurements.formulations}
-    singles = [f for f in comps if len(comps[f]) == 1]
-    multis = [f for f in comps if len(comps[f]) > 1]
-    faithful = settings.faithful if par.name == "gap" else None
-    priors = marginalised_inputs(
-        default_inputs(sorted({system.matrix, *(x for f in comps.values() for x in f)}),
-                       settings)
-        if inputs is None else inputs, contact=par.contact, settings=settings)
-    film = any(isinstance(p, FilmPrior) for p in priors.values())
-    rounds: list[dict] = []
-    # every grid calibration (at the nominal inputs, alone, per input node) over the one
-    # resistance prior that the joint posterior also has
-    cal = {"grid_points": grid_points, "seed": seed,
-           "prior": (resistance.low, resistance.high)}
+    return PARAMETRISATIONS[parametrisation], settings
+
+
+def _single_filler_stage(run: _Run, reuse: Mapping[str, ForwardModel] | None
+                         ) -> tuple[dict[str, ForwardModel], Posterior | None,
+                                    dict[str, float]]:
+    """The single-filler models (those of ``reuse`` built with the same settings and
+    parametrisation and holding nothing, the others built), calibrated with their replicas
+    anchored at the best point, then corrected on faithful RVEs where the level asks;
+    returns the models, the posterior (None without a single-filler formulation) and the
+    seconds of each step."""
+    par, singles, echo = run.par, run.singles, run.echo
     t0 = time.perf_counter()
     models: dict[str, ForwardModel] = {}
     todo = {}
     for f in singles:
         old = (reuse or {}).get(f)
-        if (old is not None and old.settings == settings and old.parametrisation == par
+        if (old is not None and old.settings == run.settings and old.parametrisation == par
                 and not old.fixed):
             models[f] = old
         else:
@@ -256,104 +331,149 @@ def identify(measurements: Measurements, parametrisation: str = "gap", *,
     if todo:
         echo(f"  {par.name}: single-filler models ({len(todo)}: RVEs, reduced bases, "
              "RVE scatter)")
-    models.update(_build_all(todo, comps, par, settings, progress, echo, engine))
+    models.update(run.build(todo))
     models = {f: models[f] for f in singles}
     seconds = {"single-filler models": time.perf_counter() - t0}
     t = time.perf_counter()
     if singles:
         echo(f"  {par.name}: calibration of {counted(len(singles), 'single-filler formulation')}"
              ", replicas solved at the best point")
-    post = _anchored(models, singles, measurements, cal) if singles else None
+    post = _anchored(models, singles, run.measurements, run.cal) if singles else None
     seconds["single-filler calibration and anchors"] = time.perf_counter() - t
-    if post is not None and faithful is not None:
+    if post is not None and run.faithful is not None:
         t = time.perf_counter()
-        echo(f"  {par.name}: faithful corrections of the single-filler models ({faithful.name})")
-        post = _corrected(models, _runtime(models, singles, echo), measurements, post,
-                          faithful, cal, rounds, echo)
+        echo(f"  {par.name}: faithful corrections of the single-filler models "
+             f"({run.faithful.name})")
+        post = run.corrected(models, singles, post)
         seconds["single-filler faithful corrections"] = time.perf_counter() - t
+    return models, post, seconds
+
+
+def _two_filler_stage(run: _Run, models: dict[str, ForwardModel], post: Posterior | None, *,
+                      vary_both: bool) -> tuple[Posterior, dict[str, float]]:
+    """The two-filler models added to ``models``: held at the single-filler posterior's
+    central point, or (``vary_both``) varying every resistance; each held one carries the
+    spread of its k_iso over that posterior. Every model is then calibrated (the new ones'
+    replicas anchored at the best point) and the new ones corrected on faithful RVEs where
+    the level asks; returns the posterior and the seconds of each step."""
+    par, multis, echo = run.par, run.multis, run.echo
     t = time.perf_counter()
-    central = post.central() if post is not None else {}
-    fixed_of = {f: {p: central[p] for p in par.parameters(list(comps[f]), matrix=system.matrix)
-                    if p in central}
-                for f in multis}
-    if joint and par.contact == "gap":   # the hybrids move with both resistances
-        fixed_of = {f: {} for f in multis}
+    fixed_of = ({f: {} for f in multis} if vary_both   # the hybrids move with both resistances
+                else _held_at(run, post))
     if multis:
         echo(f"  {par.name}: two-filler models ({len(multis)}), held at the single-filler "
              "posterior's central point")
-    models.update(_build_all(fixed_of, comps, par, settings, progress, echo, engine))
+    models.update(run.build(fixed_of))
     if multis:
         echo(f"  {par.name}: two-filler spread over the single-filler posterior, anchors and "
              "final calibration")
     for f in multis:
         if fixed_of[f]:
-            models[f].carried_scatter = _carried_scatter(models[f], post, seed)
+            models[f].carried_scatter = _carried_scatter(models[f], post, run.cal["seed"])
     if any(models[f].rb is not None for f in multis):
-        post = _anchored(models, multis, measurements, cal)
+        post = _anchored(models, multis, run.measurements, run.cal)
     elif multis or post is None:
-        post = calibrate(models, measurements, **cal)
-    seconds["two-filler models, anchors and final calibration"] = time.perf_counter() - t
-    if multis and faithful is not None:
+        post = calibrate(models, run.measurements, **run.cal)
+    seconds = {"two-filler models, anchors and final calibration": time.perf_counter() - t}
+    if multis and run.faithful is not None:
         t = time.perf_counter()
-        echo(f"  {par.name}: faithful corrections of the two-filler models ({faithful.name})")
-        post = _corrected(models, _runtime(models, multis, echo), measurements, post,
-                          faithful, cal, rounds, echo)
+        echo(f"  {par.name}: faithful corrections of the two-filler models "
+             f"({run.faithful.name})")
+        post = run.corrected(models, multis, post)
         seconds["two-filler faithful corrections"] = time.perf_counter() - t
-    if joint:
-        t = time.perf_counter()
-        echo(f"  {par.name}: the joint posterior (resistances, "
-             + ", ".join(sorted(priors)) + (", " if priors else "")
-             + "the shared correction terms and the model form; emcee"
-             + ("; one full solve per filler" + (" and one at a film" if film else "")
-                + " and formulation for the inputs' elasticities)" if priors else ")"))
-        nominal = post
-        elastic = elasticities(models, post.best, film=film) if priors else {}
-        jp, _ = run_joint(models, measurements, priors, elastic, resistance=resistance,
-                          model_form=model_form, seed=seed, progress=progress)
-        post = as_posterior(jp, resistance=resistance, stages=nominal.stages)
-        free = fit_with_inputs_free(
-            likelihood_of(models, measurements, priors, elastic, resistance=resistance,
-                          model_form=ModelFormPrior(on=False)), seed=seed)
-        fit = joint_fit_record(models, measurements, post, jp, model_form, free)
-        if floor_check:
-            fit["floor_sensitivity"] = floor_sensitivity(
-                jp, models, measurements, priors, elastic, resistance=resistance,
-                model_form=model_form, seed=seed)
-        inputs_record = {**inputs_record_of(jp, nominal, priors, seed=seed),
-                         "elasticity": elastic, "sampler": jp.summary()["sampler"]}
-        echo(f"  {par.name}: {joint_note(jp)}; {misfit_note(fit)}")
-        seconds["joint posterior"] = time.perf_counter() - t
-        alone = fit_alone(models, measurements, **cal)
-        fit["alone_agreement"] = alone_agreement(alone)
-        t = time.perf_counter()
-        echo(f"  {par.name}: the paper's screening (Eq. 4 on its grid)")
-        screening = hierarchical_screen(models, measurements)
-        seconds["screening"] = time.perf_counter() - t
-        return Identification(parametrisation, settings, models, post, screening, seconds,
-                              measurements, rounds, fit, inputs_record, alone, nominal, jp,
-                              dict(priors), model_form)
-    post, fit = with_model_form(models, measurements, post, **cal)
+    return post, seconds
+
+
+def _held_at(run: _Run, post: Posterior | None) -> dict[str, dict[str, float]]:
+    """Per two-filler formulation, its single-filler parameters at the central point of the
+    single-filler posterior ``post`` (m^2 K/W; none without one)."""
+    central = post.central() if post is not None else {}
+    matrix = run.settings.system.matrix
+    return {f: {p: central[p] for p in run.par.parameters(list(run.comps[f]), matrix=matrix)
+                if p in central}
+            for f in run.multis}
+
+
+def _joint_identification(run: _Run, models: dict[str, ForwardModel], post: Posterior,
+                          priors: Mapping[str, InputPrior | FilmPrior],
+                          seconds: dict[str, float], *, resistance: ResistancePrior,
+                          model_form: ModelFormPrior, floor_check: bool) -> Identification:
+    """The identification whose posterior is the joint one over the resistances, the
+    uncertain inputs ``priors``, the shared correction terms and the model form
+    (:func:`~.joint_fit.run_joint`); ``post``, the grid calibration at the nominal inputs,
+    is kept as its nominal one. Then the formulations alone and the paper's screening."""
+    par, echo, seed = run.par, run.echo, run.cal["seed"]
+    measurements = run.measurements
+    film = any(isinstance(p, FilmPrior) for p in priors.values())
+    t = time.perf_counter()
+    echo(f"  {par.name}: the joint posterior (resistances, "
+         + ", ".join(sorted(priors)) + (", " if priors else "")
+         + "the shared correction terms and the model form; emcee"
+         + ("; one full solve per filler" + (" and one at a film" if film else "")
+            + " and formulation for the inputs' elasticities)" if priors else ")"))
+    nominal = post
+    elastic = elasticities(models, post.best, film=film) if priors else {}
+    jp, _ = run_joint(models, measurements, priors, elastic, resistance=resistance,
+                      model_form=model_form, seed=seed, progress=run.progress)
+    post = as_posterior(jp, resistance=resistance, stages=nominal.stages)
+    free = fit_with_inputs_free(
+        likelihood_of(models, measurements, priors, elastic, resistance=resistance,
+                      model_form=ModelFormPrior(on=False)), seed=seed)
+    fit = joint_fit_record(models, measurements, post, jp, model_form, free)
+    if floor_check:
+        fit["floor_sensitivity"] = floor_sensitivity(
+            jp, models, measurements, priors, elastic, resistance=resistance,
+            model_form=model_form, seed=seed)
+    inputs_record = {**inputs_record_of(jp, nominal, priors, seed=seed),
+                     "elasticity": elastic, "sampler": jp.summary()["sampler"]}
+    echo(f"  {par.name}: {joint_note(jp)}; {misfit_note(fit)}")
+    seconds["joint posterior"] = time.perf_counter() - t
+    alone = fit_alone(models, measurements, **run.cal)
+    fit["alone_agreement"] = alone_agreement(alone)
+    screening, seconds["screening"] = _screened(run, models)
+    return Identification(run.parametrisation, run.settings, models, post, screening, seconds,
+                          measurements, run.rounds, fit, inputs_record, alone, nominal, jp,
+                          dict(priors), model_form)
+
+
+def _quadrature_identification(run: _Run, models: dict[str, ForwardModel], post: Posterior,
+                               priors: Mapping[str, InputPrior | FilmPrior],
+                               seconds: dict[str, float]) -> Identification:
+    """The identification of the earlier scheme: the grid calibration ``post`` with a
+    point-estimated model-form error (:func:`~.model_form.with_model_form`), the inputs
+    ``priors`` integrated out by quadrature (:func:`~.nuisance.marginalise`), then the
+    formulations alone and the paper's screening."""
+    par, echo, measurements = run.par, run.echo, run.measurements
+    post, fit = with_model_form(models, measurements, post, **run.cal)
     echo(f"  {par.name}: {misfit_note(fit)}")
     inputs_record: dict = {}
     nominal = post
     if priors:
+        film = any(isinstance(p, FilmPrior) for p in priors.values())
         t = time.perf_counter()
         echo(f"  {par.name}: inputs marginalised ({', '.join(sorted(priors))}; one full "
              "solve per filler" + (" and one at a film" if film else "")
              + " and formulation for its elasticity)")
         elastic = elasticities(models, post.best, film=film)
-        post, record = marginalise(models, measurements, post, priors,
-                                   elasticity=elastic, **cal)
+        post, record = marginalise(models, measurements, post, priors, elasticity=elastic,
+                                   **run.cal)
         inputs_record = {**record.to_dict(), "elasticity": elastic}
         seconds["conductivities marginalised"] = time.perf_counter() - t
-    alone = fit_alone(models, measurements, **cal)
-    t = time.perf_counter()
-    echo(f"  {par.name}: the paper's screening (Eq. 4 on its grid)")
-    screening = hierarchical_screen(models, measurements)
-    seconds["screening"] = time.perf_counter() - t
-    return Identification(parametrisation, settings, models, post, screening, seconds,
-                          measurements, rounds, fit, inputs_record, alone,
+    alone = fit_alone(models, measurements, **run.cal)
+    screening, seconds["screening"] = _screened(run, models)
+    return Identification(run.parametrisation, run.settings, models, post, screening, seconds,
+                          measurements, run.rounds, fit, inputs_record, alone,
                           None if post is nominal else nominal)
+
+
+def _screened(run: _Run, models: Mapping[str, ForwardModel]
+              ) -> tuple[list[ScreenResult], float]:
+    """The paper's screening of ``models`` (:func:`~.screen.hierarchical_screen`) and its
+    seconds."""
+    t = time.perf_counter()
+    run.echo(f"  {run.par.name}: the paper's screening (Eq. 4 on its grid)")
+    screening = hierarchical_screen(models, run.measurements)
+    return screening, time.perf_counter() - t
 
 
 def film_is_zero(settings: ForwardSettings) -> bool:
