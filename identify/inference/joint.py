@@ -1053,7 +1053,6 @@ def sample(likelihood: JointLikelihood, *, seed: int = 0, walkers: int | None = 
     over the steps whose total is, after each round, the steps the rule is expected to
     need (so its ETA     is the sampler's)."""
     import emcee
-    from tqdm.auto import tqdm
 
     space = likelihood.space
     dim = space.dim
@@ -1063,9 +1062,45 @@ def sample(likelihood: JointLikelihood, *, seed: int = 0, walkers: int | None = 
     sampler = emcee.EnsembleSampler(walkers, dim, likelihood.log_posterior, vectorize=True,
                                     moves=[(emcee.moves.DEMove(), 1.0)])
     sampler.random_state = np.random.RandomState(seed).get_state()
+    evidence_draws = evidence_draws or REFINE_PER_TARGET * TARGET_DRAWS
+    run = _run_chain(likelihood, sampler, start, seed=seed, steps=steps, burn=burn,
+                     evidence_draws=evidence_draws, progress=progress)
+    post = _chain_posterior(likelihood, sampler, run, seed=seed,
+                            evidence_draws=evidence_draws)
+    return with_marginals(likelihood, post, draws=marginal_draws) if marginals else post
+
+
+@dataclass(frozen=True, eq=False)
+class _ChainRun:
+    """Where :func:`_run_chain` stopped: the steps run (``total``), burnt (``discard``) and
+    kept, the autocorrelation time per parameter (steps), what the kept draws are worth,
+    whether the rule was met, the importance draws (:func:`refine`'s tuple, None before
+    the chain spans :data:`PROPOSAL_TAUS`) and the step they were drawn at, and whether a
+    fixed number of steps was asked (``fixed``)."""
+
+    total: int
+    discard: int
+    kept: int
+    tau: np.ndarray
+    worth: float
+    converged: bool
+    refined: tuple | None
+    refined_at: int
+    fixed: bool
+
+
+def _run_chain(likelihood: JointLikelihood, sampler: Any, start: np.ndarray, *, seed: int,
+               steps: int | None, burn: int | None, evidence_draws: int,
+               progress: bool) -> _ChainRun:
+    """Run ``sampler`` from ``start`` by the rule of :func:`sample` (``steps`` after
+    ``burn`` exactly where given); the importance draws are made once the chain spans
+    :data:`PROPOSAL_TAUS` autocorrelation times, and end the run where they are worth
+    :data:`TARGET_DRAWS`."""
+    from tqdm.auto import tqdm
+
+    walkers = sampler.nwalkers
     state, total, n = start, 0, ROUND_STEPS
     target = steps + (burn or 0) if steps is not None else None
-    evidence_draws = evidence_draws or REFINE_PER_TARGET * TARGET_DRAWS
     refined, refined_at = None, 0   # the importance draws, once the chain spans PROPOSAL_TAUS
     bar = tqdm(total=target or ROUND_STEPS, desc="joint posterior", unit="step",
                disable=not progress, leave=False)
@@ -1088,34 +1123,52 @@ def sample(likelihood: JointLikelihood, *, seed: int = 0, walkers: int | None = 
                 break
         if target is not None or converged or total >= MAX_STEPS:
             break
-        # the steps the rule needs at this autocorrelation (kept is two thirds of the total),
-        # run in one go (each check of the autocorrelation costs a pass over the chain): a
-        # proposal's chain first, the chain's own rule where its importance draws fell short
-        need = 1.5 * (max(CHAIN_TAUS * float(np.max(tau)),
-                          TARGET_DRAWS * float(np.max(tau)) / walkers)
-                      if refined is not None else PROPOSAL_TAUS * float(np.max(tau)))
-        n = int(min(MAX_STEPS - total, max(ROUND_STEPS, 1.1 * need - total)))
+        n = _next_round(total, tau, walkers, proposal=refined is not None)
         bar.total = total + n
         bar.set_postfix(tau=f"{np.max(tau):.0f}", worth=f"{worth:.0f}")
         bar.refresh()
     bar.close()
-    chain = sampler.get_chain(discard=discard, flat=True)
-    logp = sampler.get_log_prob(discard=discard, flat=True)
+    return _ChainRun(total, discard, kept, tau, worth, converged, refined, refined_at,
+                     fixed=target is not None)
+
+
+def _next_round(total: int, tau: np.ndarray, walkers: int, *, proposal: bool) -> int:
+    """Steps of the chain's next round: what the rule needs at the autocorrelation times
+    ``tau`` (the kept draws are two thirds of the total), run in one go (each check of the
+    autocorrelation costs a pass over the chain), at least :data:`ROUND_STEPS`, at most up
+    to :data:`MAX_STEPS`: a proposal's chain first, the chain's own rule where its
+    importance draws (made: ``proposal``) fell short."""
+    need = 1.5 * (max(CHAIN_TAUS * float(np.max(tau)),
+                      TARGET_DRAWS * float(np.max(tau)) / walkers)
+                  if proposal else PROPOSAL_TAUS * float(np.max(tau)))
+    return int(min(MAX_STEPS - total, max(ROUND_STEPS, 1.1 * need - total)))
+
+
+def _chain_posterior(likelihood: JointLikelihood, sampler: Any, run: _ChainRun, *,
+                     seed: int, evidence_draws: int) -> JointPosterior:
+    """The posterior of a finished run: the importance draws where they are worth
+    :data:`TARGET_DRAWS` (a run of no fixed length), else the chain's kept draws with equal
+    weights; the importance draws (made again on the whole chain where those of the run
+    fell short before its end) give the evidence either way."""
+    space = likelihood.space
+    chain = sampler.get_chain(discard=run.discard, flat=True)
+    logp = sampler.get_log_prob(discard=run.discard, flat=True)
     ll = logp - space.log_prior(chain)
-    if refined is None or (refined[2] < TARGET_DRAWS and refined_at < total):
+    refined = run.refined
+    if refined is None or (refined[2] < TARGET_DRAWS and run.refined_at < run.total):
         refined = refine(likelihood, chain, seed=seed, draws=evidence_draws)
     x, w, ess, ln_z, ln_z_se, logp_x = refined
     weights = np.full(chain.shape[0], 1.0 / chain.shape[0])
-    source = "chain"
-    if target is None and ess >= TARGET_DRAWS:
+    worth, source = run.worth, "chain"
+    if not run.fixed and ess >= TARGET_DRAWS:
         # independent draws that the chain's own need not match: where they are worth the
         # target, they are the posterior (their error is the weights' effective number)
         keep = w > 0
         chain, weights = x[keep], w[keep] / w[keep].sum()
         ll = logp_x[keep] - space.log_prior(chain)
         worth, source = ess, "importance"
-    post = JointPosterior(space.names, chain, weights, dict(space.held), ll,
-                          dict(zip(space.names, map(float, tau))),
-                          float(np.mean(sampler.acceptance_fraction)), walkers, kept,
-                          discard, seed, converged, worth, ln_z, ln_z_se, source)
-    return with_marginals(likelihood, post, draws=marginal_draws) if marginals else post
+    return JointPosterior(space.names, chain, weights, dict(space.held), ll,
+                          dict(zip(space.names, map(float, run.tau))),
+                          float(np.mean(sampler.acceptance_fraction)), sampler.nwalkers,
+                          run.kept, run.discard, seed, run.converged, worth, ln_z, ln_z_se,
+                          source)
