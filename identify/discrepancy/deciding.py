@@ -28,7 +28,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from .fit import Group, ModelFit, evaluate, fit_model
+from .fit import Group, ModelFit, evaluate, fit_held_at, fit_physical, fit_present
 from .observables import AuxGroup
 from .outcome import DecidingMeasurement, Discrepancy
 from .settings import DiscrepancySettings
@@ -88,8 +88,8 @@ def tied_set(d: Discrepancy, st: DiscrepancySettings) -> list[ModelFit]:
         return [d.winner] + [m for m in d.candidates if m is not d.winner
                              and m.bic - d.winner.bic < st.tie_margin
                              and _plausible(m, d, st)]
-    models = [fit_model(d.tables, d.groups, _effect(d, m.name), d.aux, physical=True,
-                        interval_drop=st.bic_margin / 2)
+    models = [fit_physical(d.tables, d.groups, _effect(d, m.name), d.aux,
+                           interval_drop=st.bic_margin / 2)
               for m in [d.base] + list(d.candidates)]
     pool = [m for m in models if m.log_likelihood > -1e299]
     best = min(-2 * m.log_likelihood for m in pool)
@@ -178,7 +178,7 @@ def representative(m: ModelFit, d: Discrepancy) -> ModelFit:
         return m
     lo, hi = m.interval
     end = lo if abs(lo - e.nominal) > abs(hi - e.nominal) else hi
-    return fit_model(d.tables, d.groups, e, d.aux, at=end, physical=True)
+    return fit_held_at(d.tables, d.groups, e, d.aux, at=end)
 
 
 def _side(m: ModelFit, d: Discrepancy) -> int:
@@ -187,6 +187,16 @@ def _side(m: ModelFit, d: Discrepancy) -> int:
     if e is None:
         return 0
     return -1 if m.parameters[e.parameter] < e.nominal else 1
+
+
+def _refit(d: Discrepancy, groups: list[Group], aux: list[AuxGroup], m: ModelFit, *,
+           side: int) -> ModelFit:
+    """The tied model ``m`` fitted to the expected data within its physical ranges, its
+    effect held present on ``side`` of nominal (-1 or +1; 0: free)."""
+    e = _effect(d, m.name)
+    if side:
+        return fit_present(d.tables, groups, e, aux, side=side)
+    return fit_physical(d.tables, groups, e, aux)
 
 
 def _pair_separation(sep: dict[tuple[str, str], float], a: str, b: str) -> float:
@@ -217,9 +227,8 @@ def rank_measurements(d: Discrepancy, st: DiscrepancySettings
         for name, truth in truths.items():
             groups, aux, shown = _expected_data(key, d, st, truth)
             outcomes[name] = _few(shown)
-            fits = {m.name: fit_model(d.tables, groups, _effect(d, m.name), aux,
-                                      physical=True,
-                                      present=0 if m.name == name else sides[m.name])
+            fits = {m.name: _refit(d, groups, aux, m,
+                                   side=0 if m.name == name else sides[m.name])
                     for m in tied}
             for m in tied:
                 if m.name != name:

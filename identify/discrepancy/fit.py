@@ -22,8 +22,8 @@ from .effects import Effect
 from .observables import AuxGroup, fraction_derivatives, predict
 from .tables import ForwardTables, resistance_name
 
-__all__ = ["Group", "groups_of", "ModelFit", "fit_model", "evaluate", "profile_interval",
-           "pooled_scatter"]
+__all__ = ["Group", "ModelFit", "evaluate", "fit_held_at", "fit_model", "fit_physical",
+           "fit_present", "groups_of", "pooled_scatter", "profile_interval"]
 
 
 @dataclass(frozen=True)
@@ -98,9 +98,9 @@ def groups_of(measurements: Measurements, fractions: dict[str, dict[str, float]]
     return out
 
 
-@dataclass
+@dataclass(frozen=True)
 class ModelFit:
-    """One calibrated model (base or base + one effect).
+    """One calibrated model (base or base + one effect), frozen.
 
     Attributes
     ----------
@@ -317,12 +317,10 @@ def _fraction_slopes(where: dict[str, tuple[str, float]], k: dict[str, np.ndarra
 
 
 def fit_model(tables: ForwardTables, groups: Sequence[Group], effect: Effect | None,
-              aux: Sequence[AuxGroup] = (), *, at: float | None = None,
-              physical: bool = False, present: int = 0,
-              interval_drop: float | None = None, meshes: dict | None = None) -> ModelFit:
+              aux: Sequence[AuxGroup] = (), *, meshes: dict | None = None) -> ModelFit:
     """Calibrate the base model (``effect=None``) or base + ``effect`` on the k groups and
     the auxiliary groups ``aux`` (density, mass fraction: predicted from the composition the
-    effect gives, :mod:`.observables`).
+    effect gives, :mod:`.observables`), every resistance and the effect's value free.
 
     Per formulation the observations share errors: the RVE error of its k, and for a
     variance effect the batch's fraction error, which moves k (``d ln k / d phi``), the
@@ -330,152 +328,236 @@ def fit_model(tables: ForwardTables, groups: Sequence[Group], effect: Effect | N
     powder (:attr:`Group.scale`) reads the table at ``R / scale`` and the effect at its
     size-equivalent value (:meth:`Effect.size_equivalent`); a thickness-dependent effect on
     a table without thicknesses is read at :attr:`DiscrepancySettings.assumed_thickness_mm`.
-    ``at`` holds the effect's parameter at that value (the resistances still fitted);
-    ``physical`` restricts the resistances to
-    :attr:`DiscrepancySettings.physical_r_m2K_per_W` and the effect's value to its physical
-    range (the best plausible explanation; the interval is then inside those ranges);
-    ``present`` (-1 or +1) holds the effect at least one grid step below or above nominal
-    (the effect there, not its absence); ``interval_drop`` replaces the 90 % interval's
-    log-likelihood drop. ``meshes``, a dict the caller owns, keeps the model's k on the fine
-    mesh between calls on the same tables (it does not depend on the measurements: a
-    calibration fitting many noise-only tables interpolates once).
+    ``meshes``, a dict the caller owns, keeps the model's k on the fine mesh between calls
+    on the same tables (it does not depend on the measurements: a calibration fitting many
+    noise-only tables interpolates once). The restricted fits are :func:`fit_physical`,
+    :func:`fit_held_at` and :func:`fit_present`.
     """
-    st = tables.settings
-    system = st.system
-    logr = np.log10(np.asarray(st.r_grid_m2K_per_W))
-    fine_r = np.linspace(logr[0], logr[-1], st.fine_points)
-    fine_t = _fine_axis(effect, 41)
-    fillers = sorted({g.filler for g in groups})
-    scatter = pooled_scatter(tables, groups)
-    kmesh = {}
-    theta_axis = np.asarray(effect.values if effect else [0.0], dtype=float)
+    model = _MeshModel(tables, groups, effect, aux, meshes=meshes)
+    ll, log_evidence = model.likelihood()
+    return model.fit(ll, log_evidence)
 
-    kmesh = kmesh if meshes is None else meshes.setdefault(
-        (id(tables), effect.name if effect is not None else None), {})
 
-    def mesh(f: str, scale: float) -> np.ndarray:
-        if (f, scale) not in kmesh:
-            vals = (tables.base[f] if effect is None or not effect.solved
-                    else tables.effect[effect.name][f])
+def fit_physical(tables: ForwardTables, groups: Sequence[Group], effect: Effect | None,
+                 aux: Sequence[AuxGroup] = (), *,
+                 interval_drop: float | None = None) -> ModelFit:
+    """:func:`fit_model` with the resistances restricted to
+    :attr:`DiscrepancySettings.physical_r_m2K_per_W` and the effect's value to its physical
+    range (the best plausible explanation; the interval is then inside those ranges).
+    ``interval_drop`` replaces the 90 % interval's log-likelihood drop (None or 0:
+    :data:`LR_DROP_90`); the log evidence is the unrestricted model's."""
+    model = _MeshModel(tables, groups, effect, aux)
+    ll, log_evidence = model.likelihood()
+    return model.fit(model.within_physical(ll), log_evidence,
+                     drop=interval_drop or LR_DROP_90)
+
+
+def fit_held_at(tables: ForwardTables, groups: Sequence[Group], effect: Effect,
+                aux: Sequence[AuxGroup] = (), *, at: float) -> ModelFit:
+    """:func:`fit_physical` with the effect's parameter held at the fine grid's point
+    nearest ``at`` (its unit; the resistances still fitted)."""
+    model = _MeshModel(tables, groups, effect, aux)
+    ll, log_evidence = model.likelihood()
+    return model.fit(model.within_physical(ll), log_evidence, at=at)
+
+
+def fit_present(tables: ForwardTables, groups: Sequence[Group], effect: Effect,
+                aux: Sequence[AuxGroup] = (), *, side: int) -> ModelFit:
+    """:func:`fit_physical` with the effect held at least one grid step below (``side``
+    -1) or above (+1) its nominal value: the effect there, not its absence (no hold where
+    its grid has no value on that side)."""
+    if side not in (-1, 1):
+        raise ValueError(f"side: expected -1 or +1, got {side!r}")
+    model = _MeshModel(tables, groups, effect, aux)
+    ll, log_evidence = model.likelihood()
+    return model.fit(model.present(model.within_physical(ll), side), log_evidence)
+
+
+class _MeshModel:
+    """One model (the base, or base + ``effect``) on the fine mesh of its calibration:
+    log10 R over the solved resistance grid (:attr:`DiscrepancySettings.fine_points`)
+    crossed with the effect's parameter (41 points over its grid; one point for the base
+    model), and what it predicts of each observation there."""
+
+    def __init__(self, tables: ForwardTables, groups: Sequence[Group], effect: Effect | None,
+                 aux: Sequence[AuxGroup], *, meshes: dict | None = None):
+        st = tables.settings
+        self.tables, self.groups, self.effect, self.aux, self.st = (tables, groups, effect,
+                                                                     aux, st)
+        self.logr = np.log10(np.asarray(st.r_grid_m2K_per_W))
+        self.fine_r = np.linspace(self.logr[0], self.logr[-1], st.fine_points)
+        self.fine_t = _fine_axis(effect, 41)
+        self.fillers = sorted({g.filler for g in groups})
+        self.scatter = pooled_scatter(tables, groups)
+        self.theta_axis = np.asarray(effect.values if effect else [0.0], dtype=float)
+        self.kmesh = {} if meshes is None else meshes.setdefault(
+            (id(tables), effect.name if effect is not None else None), {})
+        self.forms = _by_formulation(groups)
+        self.aux_by: dict[str, list[AuxGroup]] = {}
+        for a in aux:
+            self.aux_by.setdefault(a.formulation, []).append(a)
+        self.slopes = _fraction_slopes(
+            {f: (m[0].filler, m[0].fraction) for f, m in self.forms.items()},
+            {f: self.mesh(f, 1.0)[:, 0] for f, m in self.forms.items()})
+
+    def mesh(self, f: str, scale: float) -> np.ndarray:
+        """k of formulation ``f`` (W/(m K)) on the fine mesh, for a powder ``scale`` times
+        the nominal one's size (kept in :attr:`kmesh`)."""
+        effect, fine_r, logr = self.effect, self.fine_r, self.logr
+        if (f, scale) not in self.kmesh:
+            vals = (self.tables.base[f] if effect is None or not effect.solved
+                    else self.tables.effect[effect.name][f])
             fr = np.clip(fine_r - math.log10(scale), logr[0], logr[-1])
-            ft = fine_t
+            ft = self.fine_t
             if effect is not None and scale != 1.0:
-                ft = np.clip(effect.size_equivalent(fine_t, scale), theta_axis[0],
-                             theta_axis[-1])
+                ft = np.clip(effect.size_equivalent(self.fine_t, scale), self.theta_axis[0],
+                             self.theta_axis[-1])
             # the level per resistance, at the resistance the table is read at (R / scale
             # for another powder: the correction belongs to the RVE the table solved)
             level = np.broadcast_to(np.asarray(
-                tables.level(f, effect.name if effect else None, 10 ** fr), float), fr.shape)
-            kmesh[(f, scale)] = level[:, None] * _interp(logr, theta_axis, vals, effect,
-                                                         fr, ft)
-        return kmesh[(f, scale)]
+                self.tables.level(f, effect.name if effect else None, 10 ** fr), float),
+                fr.shape)
+            self.kmesh[(f, scale)] = level[:, None] * _interp(logr, self.theta_axis, vals,
+                                                              effect, fr, ft)
+        return self.kmesh[(f, scale)]
 
-    def model_k(g: Group, i=slice(None), j=slice(None)) -> np.ndarray:
-        k = mesh(g.formulation, g.scale)[i, j]
+    def model_k(self, g: Group, i=slice(None), j=slice(None)) -> np.ndarray:
+        """The model's k of group ``g`` at mesh rows ``i`` and columns ``j`` (the apparent
+        k at the group's thickness for a thickness-dependent effect)."""
+        effect = self.effect
+        k = self.mesh(g.formulation, g.scale)[i, j]
         if effect is not None and (g.thickness_m is not None or effect.needs_thickness):
             t = (g.thickness_m if g.thickness_m is not None
-                 else st.assumed_thickness_mm * 1e-3)
-            k = effect.apparent(k, t, fine_t[j] if np.ndim(k) == 0 else fine_t[None, j])
+                 else self.st.assumed_thickness_mm * 1e-3)
+            k = effect.apparent(k, t, self.fine_t[j] if np.ndim(k) == 0
+                                else self.fine_t[None, j])
         return k
 
-    def composition(a: AuxGroup, j=slice(None)):
-        if effect is None:
+    def composition(self, a: AuxGroup, j=slice(None)) -> tuple[np.ndarray, np.ndarray]:
+        """(filler, void) volume fractions of the samples of ``a`` at mesh columns ``j``."""
+        if self.effect is None:
             return np.asarray(a.fraction), np.asarray(0.0)
-        return effect.composition(a.fraction, fine_t[j])
+        return self.effect.composition(a.fraction, self.fine_t[j])
 
-    def model_aux(a: AuxGroup, j=slice(None)) -> np.ndarray:
-        phi, p = composition(a, j)
-        v = predict(a.observable, system, a.filler, phi, p)
+    def model_aux(self, a: AuxGroup, j=slice(None)) -> np.ndarray:
+        """The model's value of the auxiliary observable of ``a`` at mesh columns ``j``."""
+        phi, p = self.composition(a, j)
+        v = predict(a.observable, self.st.system, a.filler, phi, p)
         return v if np.ndim(v) == 0 else v[None, :]
 
-    forms = _by_formulation(groups)
-    aux_by: dict[str, list[AuxGroup]] = {}
-    for a in aux:
-        aux_by.setdefault(a.formulation, []).append(a)
-    slopes = _fraction_slopes({f: (m[0].filler, m[0].fraction) for f, m in forms.items()},
-                              {f: mesh(f, 1.0)[:, 0] for f, m in forms.items()})
-
-    def terms(f: str, i=slice(None), j=slice(None)):
+    def terms(self, f: str, i=slice(None), j=slice(None)):
         """Residuals, variances and shared columns of formulation ``f``'s observations."""
-        members, extra = forms[f], aux_by.get(f, [])
+        st, effect = self.st, self.effect
+        members, extra = self.forms[f], self.aux_by.get(f, [])
         fl = members[0].filler
-        ks = [model_k(g, i, j) for g in members]
+        ks = [self.model_k(g, i, j) for g in members]
         res = [g.mean - k for g, k in zip(members, ks)]
         var = [g.standard_error ** 2 for g in members]
-        rve = [scatter[fl] * k for k in ks] + [0.0] * len(extra)
+        rve = [self.scatter[fl] * k for k in ks] + [0.0] * len(extra)
         batch = None
         sd = np.asarray(st.fraction_sd)
         if effect is not None:
-            sd = np.hypot(effect.fraction_sd(fine_t[j]), st.fraction_sd)
+            sd = np.hypot(effect.fraction_sd(self.fine_t[j]), st.fraction_sd)
         if np.any(sd != 0):
             sd = sd if np.ndim(sd) == 0 else sd[None, :]
-            sl = slopes[f][i] if np.ndim(slopes[f][i]) == 0 else slopes[f][i][:, None]
+            sl = self.slopes[f][i] if np.ndim(self.slopes[f][i]) == 0 \
+                else self.slopes[f][i][:, None]
             batch = [sl * k * sd for k in ks]
         for a in extra:
-            pred = model_aux(a, j)
+            pred = self.model_aux(a, j)
             res.append(a.mean - pred)
             var.append(a.standard_error ** 2 + (st.auxiliary_model_sd * pred) ** 2)
             if batch is not None:
-                phi, p = composition(a, j)
-                d = fraction_derivatives(a.observable, system, a.filler, phi, p)
+                phi, p = self.composition(a, j)
+                d = fraction_derivatives(a.observable, st.system, a.filler, phi, p)
                 batch.append((d if np.ndim(d) == 0 else d[None, :]) * sd)
         return res, var, [rve] + ([batch] if batch is not None else [])
 
-    ll = {fl: np.zeros((fine_r.size, fine_t.size)) for fl in fillers}
-    for f, members in forms.items():
-        ll[members[0].filler] = ll[members[0].filler] + _gaussian_low_rank(*terms(f))[0]
-    log_evidence = _log_evidence(ll, effect.prior_weights(fine_t) if effect is not None
-                                 else np.ones(1))
-    if physical:
-        lo, hi = np.log10(st.physical_r_m2K_per_W)
+    def likelihood(self) -> tuple[dict[str, np.ndarray], float]:
+        """Per filler the log-likelihood of its formulations on the mesh (R rows, the
+        effect's columns), and the model's log evidence (:func:`_log_evidence`)."""
+        ll = {fl: np.zeros((self.fine_r.size, self.fine_t.size)) for fl in self.fillers}
+        for f, members in self.forms.items():
+            ll[members[0].filler] = ll[members[0].filler] + _gaussian_low_rank(
+                *self.terms(f))[0]
+        weights = (self.effect.prior_weights(self.fine_t) if self.effect is not None
+                   else np.ones(1))
+        return ll, _log_evidence(ll, weights)
+
+    def within_physical(self, ll: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """``ll`` with the mesh outside the physical resistances and the effect's physical
+        range ruled out."""
+        lo, hi = np.log10(self.st.physical_r_m2K_per_W)
+        fine_r, fine_t, effect = self.fine_r, self.fine_t, self.effect
         out_r = (fine_r < lo - 1e-9) | (fine_r > hi + 1e-9)
         out_t = np.zeros(fine_t.size, dtype=bool)
         if effect is not None and effect.physical_range is not None:
             a, b = effect.physical_range
             out_t = (fine_t < a - 1e-12) | (fine_t > b * (1 + 1e-9))
-        for fl in fillers:
-            ll[fl] = np.where(out_r[:, None] | out_t[None, :], -1e300, ll[fl])
-    if present and effect is not None:
+        return {fl: np.where(out_r[:, None] | out_t[None, :], -1e300, ll[fl])
+                for fl in self.fillers}
+
+    def present(self, ll: dict[str, np.ndarray], side: int) -> dict[str, np.ndarray]:
+        """``ll`` with the effect's values short of one grid step below (``side`` -1) or
+        above (+1) nominal ruled out; as it is where the grid has no value on that side."""
+        effect, fine_t = self.effect, self.fine_t
         v = np.asarray(effect.values, dtype=float)
-        side = v[v < effect.nominal] if present < 0 else v[v > effect.nominal]
-        if side.size:
-            edge = side.max() if present < 0 else side.min()
-            absent = fine_t > edge * (1 + 1e-9) if present < 0 else fine_t < edge * (1 - 1e-9)
-            for fl in fillers:
-                ll[fl] = np.where(absent[None, :], -1e300, ll[fl])
-    profile = sum(ll[fl].max(axis=0) for fl in fillers)            # (ntheta,)
-    j = int(np.argmax(profile)) if at is None else int(np.argmin(np.abs(fine_t - at)))
-    params = {}
-    best_i = {fl: int(np.argmax(ll[fl][:, j])) for fl in fillers}
-    for fl in fillers:
-        params[resistance_name(fl, st.system.matrix)] = float(10 ** fine_r[best_i[fl]])
-    index = {id(g): n for n, g in enumerate(groups)}
-    pred, var = np.zeros(len(groups)), np.zeros(len(groups))
-    aux_index = {id(a): n for n, a in enumerate(aux)}
-    aux_pred, aux_var = np.zeros(len(aux)), np.zeros(len(aux))
-    chi2 = 0.0
-    for f, members in forms.items():
-        i = best_i[members[0].filler]
-        res, v, cols = terms(f, i, j)
-        chi2 += float(_gaussian_low_rank(res, v, cols)[1])
-        # the marginal variance of each observation: its own plus the shared ones
-        for n, g in enumerate(members):
-            pred[index[id(g)]] = float(g.mean - res[n])
-            var[index[id(g)]] = float(v[n] + sum(c[n] ** 2 for c in cols))
-        for n, a in enumerate(aux_by.get(f, []), start=len(members)):
-            aux_pred[aux_index[id(a)]] = float(a.mean - res[n])
-            aux_var[aux_index[id(a)]] = float(v[n] + sum(c[n] ** 2 for c in cols))
-    interval = None
-    edge = any(best_i[fl] in (0, fine_r.size - 1) for fl in fillers)
-    if effect is not None:
-        params[effect.parameter] = float(fine_t[j])
-        interval = profile_interval(profile, fine_t, interval_drop or LR_DROP_90)
-    lmax = float(profile[j])
-    p = len(fillers) + (effect is not None)
-    n_obs = len(groups) + len(aux)
-    return ModelFit("base" if effect is None else effect.name, params, interval, pred, var,
-                    lmax, chi2, -2 * lmax + p * math.log(n_obs), p, edge, aux_pred, aux_var,
-                    n_obs, log_evidence)
+        beyond = v[v < effect.nominal] if side < 0 else v[v > effect.nominal]
+        if not beyond.size:
+            return ll
+        edge = beyond.max() if side < 0 else beyond.min()
+        absent = fine_t > edge * (1 + 1e-9) if side < 0 else fine_t < edge * (1 - 1e-9)
+        return {fl: np.where(absent[None, :], -1e300, ll[fl]) for fl in self.fillers}
+
+    def fit(self, ll: dict[str, np.ndarray], log_evidence: float, *, at: float | None = None,
+            drop: float = LR_DROP_90) -> ModelFit:
+        """The fit read off ``ll``: the effect's value of highest profile likelihood (or
+        the mesh point nearest ``at``), each filler's best resistance there, the
+        predictions and variances at that point and the effect's likelihood-ratio interval
+        (log-likelihood ``drop``)."""
+        effect, fine_r, fine_t, fillers = self.effect, self.fine_r, self.fine_t, self.fillers
+        profile = sum(ll[fl].max(axis=0) for fl in fillers)            # (ntheta,)
+        j = int(np.argmax(profile)) if at is None else int(np.argmin(np.abs(fine_t - at)))
+        params = {}
+        best_i = {fl: int(np.argmax(ll[fl][:, j])) for fl in fillers}
+        for fl in fillers:
+            params[resistance_name(fl, self.st.system.matrix)] = float(10 ** fine_r[best_i[fl]])
+        pred, var, aux_pred, aux_var, chi2 = self.at_point(best_i, j)
+        interval = None
+        edge = any(best_i[fl] in (0, fine_r.size - 1) for fl in fillers)
+        if effect is not None:
+            params[effect.parameter] = float(fine_t[j])
+            interval = profile_interval(profile, fine_t, drop)
+        lmax = float(profile[j])
+        p = len(fillers) + (effect is not None)
+        n_obs = len(self.groups) + len(self.aux)
+        return ModelFit("base" if effect is None else effect.name, params, interval, pred,
+                        var, lmax, chi2, -2 * lmax + p * math.log(n_obs), p, edge, aux_pred,
+                        aux_var, n_obs, log_evidence)
+
+    def at_point(self, best_i: dict[str, int], j: int
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, float]:
+        """At each filler's resistance row ``best_i`` and the effect's column ``j``: the
+        model value and marginal variance (its own plus the shared ones) of each k group
+        and each auxiliary group, and the generalised chi-square."""
+        groups, aux = self.groups, self.aux
+        index = {id(g): n for n, g in enumerate(groups)}
+        pred, var = np.zeros(len(groups)), np.zeros(len(groups))
+        aux_index = {id(a): n for n, a in enumerate(aux)}
+        aux_pred, aux_var = np.zeros(len(aux)), np.zeros(len(aux))
+        chi2 = 0.0
+        for f, members in self.forms.items():
+            i = best_i[members[0].filler]
+            res, v, cols = self.terms(f, i, j)
+            chi2 += float(_gaussian_low_rank(res, v, cols)[1])
+            # the marginal variance of each observation: its own plus the shared ones
+            for n, g in enumerate(members):
+                pred[index[id(g)]] = float(g.mean - res[n])
+                var[index[id(g)]] = float(v[n] + sum(c[n] ** 2 for c in cols))
+            for n, a in enumerate(self.aux_by.get(f, []), start=len(members)):
+                aux_pred[aux_index[id(a)]] = float(a.mean - res[n])
+                aux_var[aux_index[id(a)]] = float(v[n] + sum(c[n] ** 2 for c in cols))
+        return pred, var, aux_pred, aux_var, chi2
 
 
 def _log_evidence(ll: dict[str, np.ndarray], weights: np.ndarray) -> float:
