@@ -4,7 +4,7 @@ threshold, tie, unexplained): the workflow's verdict (:func:`find_discrepancy`, 
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -18,7 +18,7 @@ from .deciding import deciding_set, rank_measurements, tied_set, unseparated
 from .effects import Effect
 from .fit import Group, ModelFit, fit_model, groups_of
 from .model_form import AMPLITUDE_RANGE, LeaveOneOut, ModelFormFit, fit_model_form, leave_one_out
-from .observables import auxiliary_groups
+from .observables import AuxGroup, auxiliary_groups
 from .outcome import Discrepancy, _short
 from .settings import DiscrepancySettings
 from .tables import ForwardTables, build_tables
@@ -126,7 +126,20 @@ def find_discrepancy(measurements: Measurements, *,
     """
     settings = settings or DiscrepancySettings()
     comps = {f: fractions_of(f, settings.system) for f in measurements.formulations}
-    left_out = [f for f, c in comps.items() if len(c) != 1]
+    tables, effects = _tables_of(comps, settings, effects=effects, tables=tables, tick=tick)
+    out = _verdict(tables, groups_of(measurements, comps, system=settings.system),
+                   auxiliary_groups(measurements, comps), effects, settings,
+                   left_out=[f for f, c in comps.items() if len(c) != 1], correct=correct)
+    return _explained(out, settings) if explain else out
+
+
+def _tables_of(comps: Mapping[str, Mapping[str, float]], settings: DiscrepancySettings, *,
+               effects: Sequence[Effect] | None, tables: ForwardTables | None,
+               tick: Callable[[], None] | None) -> tuple[ForwardTables, list[Effect]]:
+    """The forward tables of the single-filler formulations of ``comps`` (``tables``, or
+    built) without corrections at best points (those belong to one table's fits), and the
+    candidates (``effects``, or the tables'); ValueError for fewer than three single-filler
+    formulations or tables that lack one."""
     singles = {f: c for f, c in comps.items() if len(c) == 1}
     if len(singles) < 3:
         raise ValueError(f"measurements: the workflow needs at least 3 single-filler "
@@ -138,9 +151,15 @@ def find_discrepancy(measurements: Measurements, *,
         raise ValueError(f"tables: no forward table for {missing}")
     effects = list(tables.effects if effects is None else effects)
     # corrections at best points belong to one table's fits: none carried from an earlier call
-    tables = replace(tables, effect_corrections={})
-    groups = groups_of(measurements, comps, system=settings.system)
-    aux = auxiliary_groups(measurements, comps)
+    return replace(tables, effect_corrections={}), effects
+
+
+def _verdict(tables: ForwardTables, groups: list[Group], aux: list[AuxGroup],
+             effects: list[Effect], settings: DiscrepancySettings, *, left_out: list[str],
+             correct: Callable[..., Corrected] | None) -> Discrepancy:
+    """The base model and every candidate calibrated, the naming threshold calibrated on
+    the table, the candidates corrected at their best points where ``correct`` is given and
+    the settings ask, and the naming rule's verdict (:func:`decide`)."""
     base = fit_model(tables, groups, None, aux)
     fits = [fit_model(tables, groups, e, aux) for e in effects]
     threshold = calibrate_threshold(tables, groups, aux, base, effects,
@@ -154,13 +173,17 @@ def find_discrepancy(measurements: Measurements, *,
     fits.sort(key=lambda m: base.log_evidence - m.log_evidence)
     p_base = float(stats.chi2.sf(base.chi_square, base.dof()))
     verdict = decide(base, fits, effects, groups, p_base, threshold, settings)
-    out = Discrepancy(verdict.verdict, verdict.statement, groups, base, fits, {}, p_base,
-                      residual_structure(groups, base), left_out, effects, verdict.winner,
-                      tables, aux=aux, densities=settings.system.densities(
-                          sorted({g.filler for g in groups})),
-                      corrected_at_best=corrected_at_best, threshold=threshold)
-    if not explain:
-        return out
+    return Discrepancy(verdict.verdict, verdict.statement, groups, base, fits, {}, p_base,
+                       residual_structure(groups, base), left_out, effects, verdict.winner,
+                       tables, aux=aux, densities=settings.system.densities(
+                           sorted({g.filler for g in groups})),
+                       corrected_at_best=corrected_at_best, threshold=threshold)
+
+
+def _explained(out: Discrepancy, settings: DiscrepancySettings) -> Discrepancy:
+    """``out`` with the tied set, the measurements that would decide it (where two models
+    or more are tied) and, where no effect is named, the model-form term, each with its
+    sentence added to the statement."""
     out = replace(out, tied=tied_set(out, settings))
     if len(out.tied) >= 2:
         deciding = rank_measurements(out, settings)
@@ -247,17 +270,12 @@ class Verdict:
     statement: str
 
 
-def decide(base: ModelFit, candidates: Sequence[ModelFit], effects: Sequence[Effect],
-           groups: Sequence[Group], p_value_base: float, threshold: NamingThreshold,
-           st: DiscrepancySettings) -> Verdict:
-    """The naming rule. A candidate is named when its log Bayes factor over the base model
-    exceeds the calibrated threshold (:mod:`.calibration`), it leaves no significant
-    residual, needs no resistance at the end of its grid, and (an input the lab stated with
-    an uncertainty) does not pull that input beyond three of its sds, which says the model
-    lacks something rather than that the input is off. Candidates within ``tie_margin / 2``
-    of the best in log Bayes factor are a tie. ``candidates`` best first."""
-    lbf = {m.name: float(m.log_evidence - base.log_evidence) for m in candidates}
-    cut = threshold.log_bayes_factor
+def _base_verdict(base: ModelFit, candidates: Sequence[ModelFit], effects: Sequence[Effect],
+                  groups: Sequence[Group], p_value_base: float,
+                  st: DiscrepancySettings) -> tuple[bool, str]:
+    """Whether the base model's misfit is a discrepancy (its residuals significant, or a
+    resistance at the end of its grid) and the sentences that say so: its chi-square, its
+    resistances' remarks, the grid's end and the thickness trend."""
     significant = p_value_base < st.significance
     base_line = (f"Base model: chi-square {base.chi_square:.1f} on {base.dof()} degrees "
                  f"of freedom (p = {p_value_base:.2g}): the residuals are "
@@ -272,6 +290,22 @@ def decide(base: ModelFit, candidates: Sequence[ModelFit], effects: Sequence[Eff
                       "itself: inside the grid the model cannot reach the measurements.")
         significant = True
     base_line += _thickness_remark(groups, base, candidates, effects, st)
+    return significant, base_line
+
+
+def decide(base: ModelFit, candidates: Sequence[ModelFit], effects: Sequence[Effect],
+           groups: Sequence[Group], p_value_base: float, threshold: NamingThreshold,
+           st: DiscrepancySettings) -> Verdict:
+    """The naming rule. A candidate is named when its log Bayes factor over the base model
+    exceeds the calibrated threshold (:mod:`.calibration`), it leaves no significant
+    residual, needs no resistance at the end of its grid, and (an input the lab stated with
+    an uncertainty) does not pull that input beyond three of its sds, which says the model
+    lacks something rather than that the input is off. Candidates within ``tie_margin / 2``
+    of the best in log Bayes factor are a tie. ``candidates`` best first."""
+    lbf = {m.name: float(m.log_evidence - base.log_evidence) for m in candidates}
+    cut = threshold.log_bayes_factor
+    significant, base_line = _base_verdict(base, candidates, effects, groups, p_value_base,
+                                           st)
     rule = (f"the naming threshold, a log Bayes factor of {cut:.2f} (at most "
             f"{threshold.false_naming_rate:.0%} of {threshold.replicates} noise-only tables "
             "drawn from the base model name an effect)")

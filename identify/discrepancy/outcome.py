@@ -22,9 +22,9 @@ def _short(name: str) -> str:
     return "no effect" if name == "base" else name
 
 
-@dataclass
+@dataclass(frozen=True)
 class DecidingMeasurement:
-    """One auxiliary measurement, simulated under each tied model.
+    """One auxiliary measurement, simulated under each tied model (frozen).
 
     Attributes
     ----------
