@@ -26,12 +26,13 @@ __all__ = ["ForwardTables", "build_tables", "n_solves", "resistance_name",
            "shipped_corrections"]
 
 
-@dataclass
+@dataclass(frozen=True)
 class ForwardTables:
     """Full-solver k_iso (W/(m K)) per formulation: ``base[f]`` on the resistance grid and
     ``effect[name][f]`` on resistance x effect-parameter grids (the first replica), the
     replica factor and RVE scatter per formulation, and the faithful correction per
-    formulation (empty without :attr:`DiscrepancySettings.faithful`)."""
+    formulation (empty without :attr:`DiscrepancySettings.faithful`); frozen (tables with
+    other corrections are a new one, :func:`dataclasses.replace`)."""
 
     settings: DiscrepancySettings
     effects: list[Effect]
@@ -134,8 +135,6 @@ def build_tables(fractions: dict[str, dict[str, float]], *,
     effects = list(default_effects(settings.system) if effects is None else effects)
     engine = engine or SolveEngine()
     t0 = time.perf_counter()
-    s = settings.forward
-    grid = list(settings.r_grid_m2K_per_W)
     base, table, factor, scatter = {}, {e.name: {} for e in effects}, {}, {}
     corrections: dict[str, Correction] = {}
     shipped = shipped_corrections(fractions, settings)
@@ -145,50 +144,92 @@ def build_tables(fractions: dict[str, dict[str, float]], *,
         for f, comp in fractions.items():
             if len(comp) != 1:
                 continue
-            (filler, _), = comp.items()
-            r_name = resistance_name(filler, s.system.matrix)
-            model = ForwardModel(f, comp, PARAMETRISATIONS["gap"], s, engine=engine)
-            model.microstructures = [model.pack(r) for r in range(s.replicas)]
-            model.replica_k = model.solve_replicas({r_name: settings.r_scatter_m2K_per_W},
-                                                   tick, purpose="RVE scatter")
-            n += len(model.microstructures)
-            factor[f], scatter[f] = model.replica_factor, model.rve_scatter
-            if f in shipped:
-                pass                            # the headline's level, per resistance
-            elif settings.faithful is not None:
-                # the level of the replica mean at the scatter's resistance, corrected to
-                # the faithful packings' voxel-bias-free mean (one factor for the whole
-                # table of the formulation)
-                corrections[f] = model.correct_at(
-                    {r_name: settings.r_scatter_m2K_per_W}, settings.faithful,
-                    k_model=float(model.replica_k.mean()), tick=tick)
-                n += 2 * settings.faithful.packings
-            ms0 = model.microstructures[0]
-            # one column per (effect, value) that changes the RVE or its phases; the base
-            # model first; every column is k_iso over the resistance grid
-            # (an effect that packs its own RVE repacks replica 0 with its seed)
-            from .steepening import Repacker
-            pack = Repacker.of(model, 0)
-            columns = [("base", None, ms0, model.materials)]
+            one = _formulation_tables(f, comp, settings, effects, engine=engine, tick=tick,
+                                      shipped=f in shipped)
+            n += one.solves
+            factor[f], scatter[f] = one.replica_factor, one.rve_scatter
+            if one.correction is not None:
+                corrections[f] = one.correction
+            base[f] = one.base
             for e in effects:
-                for theta in e.values:
-                    if e.solved and theta != e.nominal:
-                        ms = e.rebuild(pack, ms0, theta, seed=s.seed)
-                        columns.append((e.name, theta, ms,
-                                        lambda v, e=e, theta=theta, ms=ms: e.materials_in(
-                                            ms, model.materials(v), theta)))
-            requests = [SolveRequest.for_materials(
-                RVEData.of(ms), materials_at({r_name: R}), s.solver_tol, solver=s.solver,
-                purpose="discrepancy table", formulation=f, effect=name,
-                effect_value=theta) for name, theta, ms, materials_at in columns for R in grid]
-            results = engine.solve(requests, tick=tick)
-            n += len(results)
-            k = np.array([r.k_diagonal.mean() for r in results]).reshape(len(columns), len(grid))
-            solved = {(name, theta): k[i] for i, (name, theta, _, _) in enumerate(columns)}
-            base[f] = solved[("base", None)]
-            for e in effects:
-                cols = [base[f] if (not e.solved or theta == e.nominal)
-                        else solved[(e.name, theta)] for theta in e.values]
-                table[e.name][f] = np.stack(cols, axis=1)          # (nR, ntheta)
+                table[e.name][f] = one.effect[e.name]
     return ForwardTables(settings, effects, base, table, factor, scatter, n,
                          time.perf_counter() - t0, corrections, shipped=shipped)
+
+
+@dataclass(frozen=True, eq=False)
+class _FormulationTables:
+    """One formulation's part of :class:`ForwardTables`: k_iso (W/(m K)) of the base model
+    over the resistance grid and of each effect over the grid x its values, the replica
+    factor, the RVE scatter, the faithful correction (None without one) and the full
+    solves made."""
+
+    base: np.ndarray
+    effect: dict[str, np.ndarray]
+    replica_factor: float
+    rve_scatter: float
+    correction: Correction | None
+    solves: int
+
+
+def _formulation_tables(f: str, comp: dict[str, float], settings: DiscrepancySettings,
+                        effects: Sequence[Effect], *, engine: SolveEngine,
+                        tick: Callable[[], None] | None, shipped: bool) -> _FormulationTables:
+    """Pack and solve the replicas of formulation ``f`` at the scatter's resistance, correct
+    their level on faithful packings where the settings ask and no shipped correction
+    holds (``shipped``), and solve the first replica over the resistance grid for the base
+    model and every value of every effect that changes the RVE or its phases."""
+    s = settings.forward
+    grid = list(settings.r_grid_m2K_per_W)
+    (filler, _), = comp.items()
+    r_name = resistance_name(filler, s.system.matrix)
+    model = ForwardModel(f, comp, PARAMETRISATIONS["gap"], s, engine=engine)
+    model.microstructures = [model.pack(r) for r in range(s.replicas)]
+    model.replica_k = model.solve_replicas({r_name: settings.r_scatter_m2K_per_W},
+                                           tick, purpose="RVE scatter")
+    n = len(model.microstructures)
+    factor, scatter = model.replica_factor, model.rve_scatter
+    correction = None
+    if not shipped and settings.faithful is not None:   # shipped: the headline's level
+        # the level of the replica mean at the scatter's resistance, corrected to the
+        # faithful packings' voxel-bias-free mean (one factor for the whole table of the
+        # formulation)
+        correction = model.correct_at(
+            {r_name: settings.r_scatter_m2K_per_W}, settings.faithful,
+            k_model=float(model.replica_k.mean()), tick=tick)
+        n += 2 * settings.faithful.packings
+    columns = _columns(model, effects, seed=s.seed)
+    requests = [SolveRequest.for_materials(
+        RVEData.of(ms), materials_at({r_name: R}), s.solver_tol, solver=s.solver,
+        purpose="discrepancy table", formulation=f, effect=name,
+        effect_value=theta) for name, theta, ms, materials_at in columns for R in grid]
+    results = engine.solve(requests, tick=tick)
+    n += len(results)
+    k = np.array([r.k_diagonal.mean() for r in results]).reshape(len(columns), len(grid))
+    solved = {(name, theta): k[i] for i, (name, theta, _, _) in enumerate(columns)}
+    base = solved[("base", None)]
+    table = {e.name: np.stack([base if (not e.solved or theta == e.nominal)
+                               else solved[(e.name, theta)] for theta in e.values],
+                              axis=1)                                   # (nR, ntheta)
+             for e in effects}
+    return _FormulationTables(base, table, factor, scatter, correction, n)
+
+
+def _columns(model: ForwardModel, effects: Sequence[Effect], *, seed: int) -> list[tuple]:
+    """One column per (effect, value) that changes the RVE or its phases, the base model
+    first: (effect name, value, RVE, materials at the resistances); every column is k_iso
+    over the resistance grid (an effect that packs its own RVE repacks replica 0 with its
+    seed)."""
+    from .steepening import Repacker
+
+    ms0 = model.microstructures[0]
+    pack = Repacker.of(model, 0)
+    columns = [("base", None, ms0, model.materials)]
+    for e in effects:
+        for theta in e.values:
+            if e.solved and theta != e.nominal:
+                ms = e.rebuild(pack, ms0, theta, seed=seed)
+                columns.append((e.name, theta, ms,
+                                lambda v, e=e, theta=theta, ms=ms: e.materials_in(
+                                    ms, model.materials(v), theta)))
+    return columns
