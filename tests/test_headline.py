@@ -55,7 +55,7 @@ def test_the_better_fit_is_not_quoted_when_it_leaves_a_resistance_undetermined()
                       "Rff_Al2O3_AlN": "voxel-specific"},
              "gap": {"R_Al2O3_silicone": "determined", "R_AlN_silicone": "determined"}}
     c = choose_parametrisation({"area": 100.0, "gap": 138.0}, flags,
-                               {"area": 1.66, "gap": 8.76}, 0.25)
+                               chi2_dof={"area": 1.66, "gap": 8.76}, voxel_um=0.25)
     assert c["quote"] == "gap" and c["supported"] == "area" and not c["agrees"]
     assert "the data support area (BIC lower by 38.0; chi-square/dof 1.66 against 8.76)" \
         in c["why"]

@@ -35,7 +35,7 @@ interval at a faithful one. What that means for quoting is said once, in
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 
 from itr_fv.materials.parameters import parse_parameter
 
@@ -113,7 +113,7 @@ def chi_square_per_dof(ident: Identification) -> float:
 
 
 def choose_parametrisation(bics: Mapping[str, float], flags: Mapping[str, Mapping[str, str]],
-                           chi2_dof: Mapping[str, float] | None = None,
+                           *, chi2_dof: Mapping[str, float] | None = None,
                            voxel_um: float | None = None,
                            levels: Mapping[str, str] | None = None) -> dict:
     """Which parametrisation the data support and which one to quote, and why: the one rule
@@ -150,21 +150,13 @@ def choose_parametrisation(bics: Mapping[str, float], flags: Mapping[str, Mappin
         quoted one is the supported one, or none is supported).
     """
     order = sorted(bics, key=bics.get)
-    fit = dict(chi2_dof or {})
-
-    def usable(p: str) -> bool:
-        return all(f == "determined" for n, f in flags[p].items() if _filler_matrix(n))
-
-    def left(p: str) -> str:
-        return ", ".join(f"{n} {f}" for n, f in flags[p].items()
-                         if _filler_matrix(n) and f != "determined")
-
+    rule = _Determined(flags)
     out = {"bic": dict(bics), "margin": None, "supported": None}
     if len(order) == 1:
         p = order[0]
         why = "the only parametrisation run" + (
-            "" if usable(p) else f"; it leaves {left(p)}: quote the intervals, not the best "
-                                 "values")
+            "" if rule.usable(p) else f"; it leaves {rule.left(p)}: quote the intervals, "
+                                      "not the best values")
         return {**out, "quote": p, "why": why, "agrees": True}
     lowest, other = order[0], order[1]
     margin = bics[other] - bics[lowest]
@@ -173,52 +165,18 @@ def choose_parametrisation(bics: Mapping[str, float], flags: Mapping[str, Mappin
     if not compared:
         supported = None
     out.update(margin=margin if compared else None, supported=supported)
-    ok = [p for p in order if usable(p)]
     if not compared:
-        at = ", ".join(f"{p} at {levels[p]}" for p in order)
-        if ok:
-            q = ok[0]
-            rest = [p for p in order if p != q]
-            return {**out, "quote": q, "agrees": True,
-                    "why": f"not compared by their BIC: their models sit at different "
-                           f"fidelity ({at}); {q} determines its filler-matrix resistances"
-                           + "".join(f"; {p} leaves {left(p)}" for p in rest if left(p))}
-        q = "gap" if "gap" in order else lowest
-        return {**out, "quote": q, "agrees": True,
-                "why": f"not compared by their BIC: their models sit at different fidelity "
-                       f"({at}); no parametrisation determines every filler-matrix "
-                       f"resistance ({q} leaves {left(q)}): quote the intervals, not the "
-                       "best values"}
-    if supported is not None and usable(supported):
+        return {**out, **_not_compared(order, rule, levels)}
+    if supported is not None and rule.usable(supported):
         return {**out, "quote": supported, "agrees": True,
                 "why": f"the data support it (BIC lower by {margin:.1f} than {other}) and its "
                        "filler-matrix resistances are determined"}
+    ok = [p for p in order if rule.usable(p)]
+    if ok and supported is None:
+        return {**out, **_neither_supported(order, rule, q=ok[0], margin=margin)}
     if ok:
-        q = ok[0]
-        if supported is None:
-            why = (f"neither parametrisation is supported over the other (BIC difference "
-                   f"{margin:.1f}); {q} determines its filler-matrix resistances")
-            rest = [p for p in order if p != q and not usable(p)]
-            if rest:
-                why += "; " + "; ".join(f"{p} leaves {left(p)}" for p in rest)
-            return {**out, "quote": q, "why": why, "agrees": True}
-        s = supported
-        fits = f"BIC lower by {margin:.1f}"
-        if s in fit and q in fit:
-            fits += f"; chi-square/dof {fit[s]:.2f} against {fit[q]:.2f}"
-        why = (f"the data support {s} ({fits}), but it does not determine its "
-               f"filler-matrix resistances ({left(s)})")
-        voxel = [n for n, f in flags[s].items() if f == "voxel-specific"]
-        if voxel:
-            at = f"the {voxel_um:g} um voxel" if voxel_um else "the voxel"
-            why += (f", and its fit rests on per-area contact resistances ({', '.join(voxel)}) "
-                    f"that are properties of {at}, not of the materials, and do not transfer "
-                    "to another resolution")
-        why += f"; {q} determines them"
-        if q in fit and fit[q] > 2.0:
-            why += (f", but its poorer fit (chi-square/dof {fit[q]:.2f}) is model error that "
-                    "its 90 % intervals do not carry")
-        return {**out, "quote": q, "why": why, "agrees": False}
+        return {**out, **_other_quoted(rule, supported=supported, quoted=ok[0], margin=margin,
+                                       fit=dict(chi2_dof or {}), voxel_um=voxel_um)}
     q = supported or lowest
     what = ("the data support it" if supported else
             f"the lower BIC, though not supported over {other} (difference {margin:.1f})")
@@ -226,7 +184,86 @@ def choose_parametrisation(bics: Mapping[str, float], flags: Mapping[str, Mappin
         what += f" (BIC lower by {margin:.1f} than {other})"
     return {**out, "quote": q, "agrees": True,
             "why": f"{what}; no parametrisation determines every filler-matrix resistance "
-                   f"({q} leaves {left(q)}): quote the intervals, not the best values"}
+                   f"({q} leaves {rule.left(q)}): quote the intervals, not the best values"}
+
+
+class _Determined:
+    """Whether a parametrisation determines its filler-matrix resistances, by their
+    ``flags`` (per parametrisation, per parameter), and which it leaves."""
+
+    def __init__(self, flags: Mapping[str, Mapping[str, str]]):
+        self.flags = flags
+
+    def usable(self, p: str) -> bool:
+        """Whether every filler-matrix resistance of ``p`` is ``determined``."""
+        return all(f == "determined" for n, f in self.flags[p].items() if _filler_matrix(n))
+
+    def left(self, p: str) -> str:
+        """The filler-matrix resistances of ``p`` not determined, each with its flag."""
+        return ", ".join(f"{n} {f}" for n, f in self.flags[p].items()
+                         if _filler_matrix(n) and f != "determined")
+
+
+def _not_compared(order: Sequence[str], rule: _Determined,
+                  levels: Mapping[str, str]) -> dict:
+    """The choice (``quote``, ``agrees``, ``why``) where the models sit at different
+    fidelity levels and are not compared by their BIC: the first of ``order`` (lowest BIC
+    first) that determines its filler-matrix resistances, else gap (or the lowest BIC) with
+    the warning to quote intervals."""
+    at = ", ".join(f"{p} at {levels[p]}" for p in order)
+    ok = [p for p in order if rule.usable(p)]
+    if ok:
+        q = ok[0]
+        rest = [p for p in order if p != q]
+        return {"quote": q, "agrees": True,
+                "why": f"not compared by their BIC: their models sit at different "
+                       f"fidelity ({at}); {q} determines its filler-matrix resistances"
+                       + "".join(f"; {p} leaves {rule.left(p)}" for p in rest
+                                 if rule.left(p))}
+    q = "gap" if "gap" in order else order[0]
+    return {"quote": q, "agrees": True,
+            "why": f"not compared by their BIC: their models sit at different fidelity "
+                   f"({at}); no parametrisation determines every filler-matrix "
+                   f"resistance ({q} leaves {rule.left(q)}): quote the intervals, not the "
+                   "best values"}
+
+
+def _neither_supported(order: Sequence[str], rule: _Determined, *, q: str,
+                       margin: float) -> dict:
+    """The choice where neither parametrisation is supported over the other (BIC
+    difference ``margin`` below :data:`BIC_MARGIN`): ``q``, which determines its
+    filler-matrix resistances, with what the others leave."""
+    why = (f"neither parametrisation is supported over the other (BIC difference "
+           f"{margin:.1f}); {q} determines its filler-matrix resistances")
+    rest = [p for p in order if p != q and not rule.usable(p)]
+    if rest:
+        why += "; " + "; ".join(f"{p} leaves {rule.left(p)}" for p in rest)
+    return {"quote": q, "why": why, "agrees": True}
+
+
+def _other_quoted(rule: _Determined, *, supported: str, quoted: str, margin: float,
+                  fit: Mapping[str, float], voxel_um: float | None) -> dict:
+    """The choice where the data support ``supported`` but it leaves a filler-matrix
+    resistance undetermined, and ``quoted`` determines them: why the better fit is not
+    quoted (its voxel-specific contact resistances, the quoted one's poorer fit ``fit``,
+    chi-square per degree of freedom)."""
+    s, q = supported, quoted
+    fits = f"BIC lower by {margin:.1f}"
+    if s in fit and q in fit:
+        fits += f"; chi-square/dof {fit[s]:.2f} against {fit[q]:.2f}"
+    why = (f"the data support {s} ({fits}), but it does not determine its "
+           f"filler-matrix resistances ({rule.left(s)})")
+    voxel = [n for n, f in rule.flags[s].items() if f == "voxel-specific"]
+    if voxel:
+        at = f"the {voxel_um:g} um voxel" if voxel_um else "the voxel"
+        why += (f", and its fit rests on per-area contact resistances ({', '.join(voxel)}) "
+                f"that are properties of {at}, not of the materials, and do not transfer "
+                "to another resolution")
+    why += f"; {q} determines them"
+    if q in fit and fit[q] > 2.0:
+        why += (f", but its poorer fit (chi-square/dof {fit[q]:.2f}) is model error that "
+                "its 90 % intervals do not carry")
+    return {"quote": q, "why": why, "agrees": False}
 
 
 def parametrisation_choice(idents: Mapping[str, Identification],
@@ -240,8 +277,9 @@ def parametrisation_choice(idents: Mapping[str, Identification],
     chi2 = {p: chi_square_per_dof(i) for p, i in idents.items()}
     voxel = next(iter(idents.values())).settings.voxel_um
     levels = {p: level_name(i) for p, i in idents.items()}
-    return {**choose_parametrisation({p: i.bic() for p, i in idents.items()}, flags, chi2,
-                                     voxel, levels), "chi2_dof": chi2, "levels": levels}
+    return {**choose_parametrisation({p: i.bic() for p, i in idents.items()}, flags,
+                                     chi2_dof=chi2, voxel_um=voxel, levels=levels),
+            "chi2_dof": chi2, "levels": levels}
 
 
 def level_name(ident: Identification) -> str:
