@@ -156,102 +156,134 @@ def error_budget(ident: Identification) -> dict:
     for stage in stages_of(ident.models):
         scatter = pooled_scatter([ident.models[f] for f in stage.formulations])
         for f in stage.formulations:
-            m = ident.models[f]
-            k, err = m.predict({p: np.array([best[p]]) for p in m.parameters})
-            meas = ident.measurements
-            system = _system(m.fractions)
-            items: dict[str, dict] = {
-                "measurement noise": {"value": meas.standard_error(f) / meas.mean(f),
-                                      "in_likelihood": True, "basis": "standard error of the "
-                                      "mean of the replicates"},
-                "RVE scatter": {"value": scatter, "in_likelihood": True,
-                                "basis": f"{s.replicas} packings of {s.box_um:g} um"},
-                "surrogate error": {"value": float(err[0] / k[0]), "in_likelihood": True,
-                                    "basis": "reduced basis's certified bound"},
-            }
-            corr = m.correction
-            if corr is not None:
-                items["faithful correction (applied)"] = {
-                    "value": corr.factor - 1, "in_likelihood": False,
-                    "basis": f"{corr.box_um:g} um box at {corr.voxel_um:g}/"
-                             f"{corr.coarse_voxel_um:g} um, {len(corr.seeds)} packings"}
-                items["of it: voxel bias removed (applied)"] = {
-                    "value": -corr.voxel_bias, "in_likelihood": False,
-                    "basis": f"Richardson, p = {corr.order:.2f}"}
-                items["correction uncertainty"] = {
-                    "value": corr.relative_sd, "in_likelihood": True,
-                    "basis": "faithful packings' scatter and the bias order's uncertainty"}
-                box = corr.box_um
-            elif m.shipped is not None:
-                box = _shipped_items(items, m, best)
-            else:
-                bias, basis = _voxel_bias(s.voxel_um)
-                items["voxel bias (not corrected)"] = {
-                    "value": None if bias is None else -bias, "in_likelihood": False,
-                    "basis": basis}
-                box = s.box_um
-            if corr is None and m.shipped is not None:
-                eff, basis = 0.0, (f"corrected to the converged {box:g} um box; what the box "
-                                   "study resolves of the step is in the shared term")
-            else:
-                eff, basis = _box_effect(system, box)
-            items["box effect beyond the box solved"] = {"value": eff, "in_likelihood": False,
-                                                         "basis": basis}
-            for name, q in (("film 2 nm", "film_2nm"), ("film 5 nm", "film_5nm"),
-                            ("Table 1 volume-weighted", "psd_volume")):
-                v, basis = _input_effect(system, q)
-                items[name] = {"value": v, "in_likelihood": False, "basis": basis}
-            numerical = [items[n]["value"] for n in ("RVE scatter", "surrogate error",
-                                                     "correction uncertainty",
-                                                     "correction uncertainty, shared",
-                                                     "voxel bias (not corrected)",
-                                                     "box effect beyond the box solved")
-                         if n in items and items[n]["value"] is not None]
-            forms[f] = {"system": system, "k_iso": float(k[0]), "items": items,
-                        "numerical_rss": float(math.hypot(*numerical)) if numerical else 0.0,
-                        "slopes": {p: _slope(m, best, p) for p in m.parameters}}
+            forms[f] = _formulation_budget(ident, f, scatter=scatter, best=best)
     params: dict[str, dict] = {}
-    beyond: dict[str, list[str]] = {}
     prior_width = math.log(post.prior[1] / post.prior[0])
     for p in post.names:
         using = [f for f, d in forms.items() if p in d["slopes"]]
-        if not using:
-            continue
-        slope = float(np.mean([forms[f]["slopes"][p] for f in using]))
-        lo, hi = post.interval(p)
-        factors = {}
-        for name in forms[using[0]]["items"]:
-            vals = [forms[f]["items"][name]["value"] for f in using]
-            if any(v is None for v in vals) or abs(slope) < 1e-6:
-                factors[name] = None
-                continue
-            delta = float(np.mean(vals))
-            if name in ("measurement noise", "RVE scatter", "surrogate error",
-                        "correction uncertainty", "correction uncertainty, shared"):
-                delta = -abs(delta)  # a standard deviation: shown as the factor of +1 sd
-            # an effect that would move R beyond the prior's whole width says only that:
-            # the model cannot turn it into a factor (k barely moves with R there)
-            factors[name] = (math.exp(-delta / slope) if abs(delta / slope) <= prior_width
-                             else None)
-            if factors[name] is None:
-                beyond.setdefault(p, []).append(name)
-        params[p] = {"formulations": using, "dlnk_dlnR": slope,
-                     "interval_half_width_factor": math.sqrt(hi / lo), "factors": factors,
-                     "beyond_prior": beyond.get(p, [])}
-    ranked: dict[str, float] = {}
-    for p, d in params.items():
-        for name, fct in d["factors"].items():
-            if fct is not None and "applied" not in name:  # applied: not an error
-                ranked[name] = max(ranked.get(name, 0.0), abs(math.log(fct)))
-    dominant = sorted(ranked, key=ranked.get, reverse=True)[:3]
+        if using:
+            params[p] = _parameter_budget(p, forms, using, post, prior_width=prior_width)
     below = {f: d["numerical_rss"] < d["items"]["measurement noise"]["value"]
              for f, d in forms.items()}
     level = fidelity_name(s.faithful)
     if s.faithful is not None and faithful is None:
         level += " (not applied to the area parametrisation)"
     return {"fidelity": level,
-            "formulations": forms, "parameters": params, "dominant": dominant,
+            "formulations": forms, "parameters": params, "dominant": _dominant(params),
             "numerical_below_noise": below}
+
+
+#: The budget's entries that are numerical errors of the model (summed in quadrature as a
+#: formulation's ``numerical_rss``).
+_NUMERICAL = ("RVE scatter", "surrogate error", "correction uncertainty",
+              "correction uncertainty, shared", "voxel bias (not corrected)",
+              "box effect beyond the box solved")
+#: The entries that are standard deviations (a factor of +1 sd on a resistance).
+_SDS = ("measurement noise", "RVE scatter", "surrogate error", "correction uncertainty",
+        "correction uncertainty, shared")
+
+
+def _formulation_budget(ident: Identification, f: str, *, scatter: float,
+                        best: Mapping[str, float]) -> dict:
+    """One formulation's entry of the budget at the parameters ``best`` (m^2 K/W): its
+    system, k_iso, the relative effects on k_iso (``items``), their numerical part summed
+    in quadrature and d ln k / d ln R per parameter; ``scatter`` is the RVE scatter pooled
+    over its stage."""
+    s, m, meas = ident.settings, ident.models[f], ident.measurements
+    k, err = m.predict({p: np.array([best[p]]) for p in m.parameters})
+    system = _system(m.fractions)
+    items: dict[str, dict] = {
+        "measurement noise": {"value": meas.standard_error(f) / meas.mean(f),
+                              "in_likelihood": True, "basis": "standard error of the "
+                              "mean of the replicates"},
+        "RVE scatter": {"value": scatter, "in_likelihood": True,
+                        "basis": f"{s.replicas} packings of {s.box_um:g} um"},
+        "surrogate error": {"value": float(err[0] / k[0]), "in_likelihood": True,
+                            "basis": "reduced basis's certified bound"},
+    }
+    box = _level_items(items, m, best, settings=s)
+    if m.correction is None and m.shipped is not None:
+        eff, basis = 0.0, (f"corrected to the converged {box:g} um box; what the box "
+                           "study resolves of the step is in the shared term")
+    else:
+        eff, basis = _box_effect(system, box)
+    items["box effect beyond the box solved"] = {"value": eff, "in_likelihood": False,
+                                                 "basis": basis}
+    for name, q in (("film 2 nm", "film_2nm"), ("film 5 nm", "film_5nm"),
+                    ("Table 1 volume-weighted", "psd_volume")):
+        v, basis = _input_effect(system, q)
+        items[name] = {"value": v, "in_likelihood": False, "basis": basis}
+    numerical = [items[n]["value"] for n in _NUMERICAL
+                 if n in items and items[n]["value"] is not None]
+    return {"system": system, "k_iso": float(k[0]), "items": items,
+            "numerical_rss": float(math.hypot(*numerical)) if numerical else 0.0,
+            "slopes": {p: _slope(m, best, p) for p in m.parameters}}
+
+
+def _level_items(items: dict, m, best: Mapping[str, float], *, settings) -> float:
+    """The entries of a formulation's budget that its fidelity level makes (a runtime
+    faithful correction, a shipped one, or the voxel bias no correction removes), added to
+    ``items``; returns the box the level's k belongs to, um."""
+    corr = m.correction
+    if corr is not None:
+        items["faithful correction (applied)"] = {
+            "value": corr.factor - 1, "in_likelihood": False,
+            "basis": f"{corr.box_um:g} um box at {corr.voxel_um:g}/"
+                     f"{corr.coarse_voxel_um:g} um, {len(corr.seeds)} packings"}
+        items["of it: voxel bias removed (applied)"] = {
+            "value": -corr.voxel_bias, "in_likelihood": False,
+            "basis": f"Richardson, p = {corr.order:.2f}"}
+        items["correction uncertainty"] = {
+            "value": corr.relative_sd, "in_likelihood": True,
+            "basis": "faithful packings' scatter and the bias order's uncertainty"}
+        return corr.box_um
+    if m.shipped is not None:
+        return _shipped_items(items, m, best)
+    bias, basis = _voxel_bias(settings.voxel_um)
+    items["voxel bias (not corrected)"] = {
+        "value": None if bias is None else -bias, "in_likelihood": False, "basis": basis}
+    return settings.box_um
+
+
+def _parameter_budget(p: str, forms: Mapping[str, dict], using: list[str], post, *,
+                      prior_width: float) -> dict:
+    """One resistance's entry of the budget: d ln k / d ln R over the formulations
+    ``using`` that identify it (their mean), each effect as a factor on R (None where an
+    effect is unknown, k does not move with R, or it would move R beyond the prior's whole
+    width ``prior_width``, natural log; those listed in ``beyond_prior``) and the 90 %
+    interval's half-width as a factor."""
+    slope = float(np.mean([forms[f]["slopes"][p] for f in using]))
+    lo, hi = post.interval(p)
+    factors: dict[str, float | None] = {}
+    beyond: list[str] = []
+    for name in forms[using[0]]["items"]:
+        vals = [forms[f]["items"][name]["value"] for f in using]
+        if any(v is None for v in vals) or abs(slope) < 1e-6:
+            factors[name] = None
+            continue
+        delta = float(np.mean(vals))
+        if name in _SDS:
+            delta = -abs(delta)  # a standard deviation: shown as the factor of +1 sd
+        # an effect that would move R beyond the prior's whole width says only that:
+        # the model cannot turn it into a factor (k barely moves with R there)
+        factors[name] = (math.exp(-delta / slope) if abs(delta / slope) <= prior_width
+                         else None)
+        if factors[name] is None:
+            beyond.append(name)
+    return {"formulations": using, "dlnk_dlnR": slope,
+            "interval_half_width_factor": math.sqrt(hi / lo), "factors": factors,
+            "beyond_prior": beyond}
+
+
+def _dominant(params: Mapping[str, dict]) -> list[str]:
+    """The three effects (not the applied corrections) that move a resistance most, by
+    their largest factor over the resistances."""
+    ranked: dict[str, float] = {}
+    for d in params.values():
+        for name, fct in d["factors"].items():
+            if fct is not None and "applied" not in name:  # applied: not an error
+                ranked[name] = max(ranked.get(name, 0.0), abs(math.log(fct)))
+    return sorted(ranked, key=ranked.get, reverse=True)[:3]
 
 
 def _pct(v: float | None) -> str:
