@@ -17,9 +17,9 @@ import pytest
 
 from itr_fv.rve.spec import RVESpec
 from itr_identify.discrepancy import effects as fx
-from itr_identify.discrepancy.calibration import FLOOR, NamingThreshold
 from itr_identify.discrepancy.decision import decide, find_discrepancy
 from itr_identify.discrepancy.fit import Group, ModelFit, _log_evidence, evaluate
+from itr_identify.discrepancy.naming_threshold import FLOOR, NamingThreshold
 from itr_identify.discrepancy.settings import DiscrepancySettings
 from itr_identify.discrepancy.tables import build_tables
 from itr_identify.forward.model import ForwardSettings

@@ -19,7 +19,7 @@ from itr_identify.forward.model import ForwardSettings
 from itr_identify.inference.calibrate import calibrate
 from itr_identify.inference.formulations import fractions_of
 from itr_identify.inference.measurements import Measurements
-from itr_identify.inference.model_form import (
+from itr_identify.inference.misfit import (
     MISFIT_P,
     chi_square_p,
     fit_record,

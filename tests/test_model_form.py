@@ -12,7 +12,7 @@ from sklearn.gaussian_process import GaussianProcessRegressor
 from sklearn.gaussian_process.kernels import RBF, ConstantKernel
 
 from itr_fv.analytic import hasselman_johnson
-from itr_identify.discrepancy import model_form as mf
+from itr_identify.discrepancy import gp_discrepancy as mf
 from itr_identify.discrepancy.fit import Group
 from itr_identify.discrepancy.settings import DiscrepancySettings
 from itr_identify.discrepancy.tables import ForwardTables

@@ -99,7 +99,7 @@ def test_a_campaign_and_the_discrepancy_settings_take_the_system():
     from itr_identify.discrepancy.settings import DiscrepancySettings
     from itr_identify.discrepancy.tables import n_solves
     from itr_identify.forward.fidelity import cheap_rve_for
-    from itr_identify.forward.workload import tables_workload
+    from itr_identify.forward.work_estimate import tables_workload
     from itr_surrogate.campaign import Campaign
 
     zno = read_system(ZNO)

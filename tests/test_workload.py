@@ -160,7 +160,7 @@ def test_side_by_side_processes_each_count_in_the_peak_and_the_plan_says_so():
     process's as if alone, plus this process's base; the plan names the processes; a
     bad count is refused naming the argument."""
     from itr_identify.forward.model import ForwardSettings
-    from itr_identify.forward.workload import identification_workload
+    from itr_identify.forward.work_estimate import identification_workload
     from itr_surrogate.workload import PROCESS_BASE_BYTES, Workload
 
     g = Grid("g", 12.0, 0.25, rves=10, solves=20, fields=True, kept_fields=4)

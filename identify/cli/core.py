@@ -159,7 +159,7 @@ def identification_plan(args: argparse.Namespace, settings, formulations, *,
                         validation: bool):
     """The :class:`~itr_surrogate.workload.Workload` of ``itr identify`` and ``itr
     reproduce``: identifying ``formulations`` with ``settings`` (a ReproduceSettings)."""
-    from ..forward.workload import identification_workload
+    from ..forward.work_estimate import identification_workload
     from ..inference.formulations import fractions_of
 
     system = settings.forward.system

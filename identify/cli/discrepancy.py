@@ -26,7 +26,7 @@ def _run(args: argparse.Namespace) -> int:
     from ..discrepancy.settings import DiscrepancySettings
     from ..discrepancy.tables import n_solves, shipped_corrections
     from ..forward.fidelity import cheap_rve_for, faithful_for
-    from ..forward.workload import tables_workload
+    from ..forward.work_estimate import tables_workload
     from ..inference.formulations import fractions_of
     from ..inference.measurements import read_measurements
     from ..workflows.discrepancy import run_discrepancy

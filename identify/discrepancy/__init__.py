@@ -19,7 +19,7 @@
 4. **Selection** (:mod:`.decision`). Candidates ranked by their log Bayes factor over the
    base model (:attr:`.fit.ModelFit.log_evidence`: the likelihood integrated over the
    resistances and the effect's prior). One is *named* when it exceeds the threshold
-   calibrated on the table (:mod:`.calibration`: the quantile of the largest log Bayes
+   calibrated on the table (:mod:`.naming_threshold`: the quantile of the largest log Bayes
    factor on noise-only tables drawn from the base model that keeps false naming at
    :attr:`.settings.DiscrepancySettings.false_naming_rate`), leaves no significant residual,
    needs no resistance at the edge of its grid and does not pull a stated input beyond three

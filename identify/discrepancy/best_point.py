@@ -25,7 +25,7 @@ from itr_surrogate.engine import RVEData, SolveEngine, SolveRequest
 from ..forward.fidelity import Correction
 from ..forward.model import PARAMETRISATIONS, ForwardModel, filler_specs
 from ..inference.formulations import fractions_of
-from .effect import Effect
+from .candidate import Effect
 from .fit import Group, ModelFit, evaluate, fit_model
 from .observables import AuxGroup
 from .steepening import Repacker

@@ -13,15 +13,21 @@ from scipy import stats
 from ..inference.formulations import fractions_of
 from ..inference.measurements import Measurements
 from .best_point import Corrected
-from .calibration import NamingThreshold, calibrate_threshold
-from .deciding import deciding_set, rank_measurements, tied_set, unseparated
 from .effects import Effect
 from .fit import Group, ModelFit, fit_model, groups_of
-from .model_form import AMPLITUDE_RANGE, LeaveOneOut, ModelFormFit, fit_model_form, leave_one_out
+from .gp_discrepancy import (
+    AMPLITUDE_RANGE,
+    LeaveOneOut,
+    ModelFormFit,
+    fit_model_form,
+    leave_one_out,
+)
+from .naming_threshold import NamingThreshold, calibrate_threshold
 from .observables import AuxGroup, auxiliary_groups
 from .outcome import Discrepancy, _short
 from .settings import DiscrepancySettings
 from .tables import ForwardTables, build_tables
+from .tie_breaking import deciding_set, rank_measurements, tied_set, unseparated
 
 __all__ = ["Discrepancy", "Verdict", "decide", "find_discrepancy", "residual_structure",
            "resistance_remarks", "thickness_trend"]
@@ -297,7 +303,7 @@ def decide(base: ModelFit, candidates: Sequence[ModelFit], effects: Sequence[Eff
            groups: Sequence[Group], p_value_base: float, threshold: NamingThreshold,
            st: DiscrepancySettings) -> Verdict:
     """The naming rule. A candidate is named when its log Bayes factor over the base model
-    exceeds the calibrated threshold (:mod:`.calibration`), it leaves no significant
+    exceeds the calibrated threshold (:mod:`.naming_threshold`), it leaves no significant
     residual, needs no resistance at the end of its grid, and (an input the lab stated with
     an uncertainty) does not pull that input beyond three of its sds, which says the model
     lacks something rather than that the input is off. Candidates within ``tie_margin / 2``

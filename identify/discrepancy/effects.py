@@ -29,7 +29,7 @@ from itr_fv.analytic import maxwell_garnett
 from itr_fv.materials import default_system
 from itr_fv.materials.material_system import MaterialSystem
 
-from .effect import Effect
+from .candidate import Effect
 from .steepening import STEEPENING_EFFECTS
 
 __all__ = ["Effect", "MatrixConductivity", "FillerConductivity", "Porosity",

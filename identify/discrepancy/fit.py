@@ -128,7 +128,7 @@ class ModelFit:
         ``ln`` of the likelihood integrated over the model's priors: each resistance
         log-uniform over the solved grid, the effect's parameter by
         :meth:`Effect.prior_weights`. Its difference to the base model's is the log Bayes
-        factor that names an effect (:mod:`.calibration`).
+        factor that names an effect (:mod:`.naming_threshold`).
     """
 
     name: str

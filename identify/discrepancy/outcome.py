@@ -1,6 +1,6 @@
 """What the discrepancy workflow finds (:class:`Discrepancy`) and the auxiliary measurements
 it proposes to decide a tie (:class:`DecidingMeasurement`): the result types, apart from
-the steps that make them (:mod:`.decision`, :mod:`.deciding`, :mod:`.best_point`)."""
+the steps that make them (:mod:`.decision`, :mod:`.tie_breaking`, :mod:`.best_point`)."""
 
 from __future__ import annotations
 
@@ -8,10 +8,10 @@ from dataclasses import dataclass, field
 
 from scipy import stats
 
-from .calibration import NamingThreshold
-from .effect import Effect
+from .candidate import Effect
 from .fit import Group, ModelFit
-from .model_form import LeaveOneOut, ModelFormFit
+from .gp_discrepancy import LeaveOneOut, ModelFormFit
+from .naming_threshold import NamingThreshold
 from .observables import AuxGroup
 from .tables import ForwardTables
 
@@ -120,7 +120,7 @@ class Discrepancy:
     left_out : list of str
         Formulations not used (two-filler).
     model_form : ModelFormFit or None
-        The base model with the model-form term (:mod:`itr_identify.discrepancy.model_form`),
+        The base model with the model-form term (:mod:`itr_identify.discrepancy.gp_discrepancy`),
         calibrated when no candidate is named.
     leave_one_out : dict of str to LeaveOneOut
         With the model-form term: each formulation predicted from the others by the base
@@ -130,7 +130,7 @@ class Discrepancy:
     densities : dict
         The phase densities the auxiliary predictions used, g/cm^3.
     tied : list of ModelFit
-        The models the data cannot tell apart (:func:`.deciding.tied_set`): within the tie
+        The models the data cannot tell apart (:func:`.tie_breaking.tied_set`): within the tie
         margin in likelihood, physically plausible, and (a candidate) reaching an effect of
         one grid step or more.
     deciding : list of DecidingMeasurement
@@ -143,7 +143,7 @@ class Discrepancy:
         together separate every pair where no single one does.
     threshold : NamingThreshold or None
         The naming rule's threshold on the log Bayes factor, calibrated on this table
-        (:mod:`.calibration`).
+        (:mod:`.naming_threshold`).
     """
 
     verdict: str

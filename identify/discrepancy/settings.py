@@ -40,14 +40,14 @@ class DiscrepancySettings:
         Points of the calibration grid per axis.
     bic_margin : float
         BIC separation that the measurement proposed to decide a tie is expected to give
-        (:mod:`.deciding`); the verdict itself is the Bayes factor's.
+        (:mod:`.tie_breaking`); the verdict itself is the Bayes factor's.
     tie_margin : float
         BIC difference under which two candidates explain the data equally well (half of
         it in log Bayes factor for the verdict's tie).
     false_naming_rate : float
         The share of noise-only tables (drawn from the calibrated base model) on which the
         naming rule may name an effect: sets the threshold on the log Bayes factor
-        (:mod:`.calibration`).
+        (:mod:`.naming_threshold`).
     calibration_replicates : int
         Noise-only tables drawn to set that threshold (each fits every candidate once).
     calibration_seed : int

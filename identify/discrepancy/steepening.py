@@ -37,7 +37,7 @@ from itr_fv.materials.material_system import MaterialSystem
 from itr_fv.rve import FillerSpec, generate_rve
 from itr_fv.rve.spec import RVESpec
 
-from .effect import Effect
+from .candidate import Effect
 
 __all__ = ["Repacker", "FilmThinning", "Agglomeration", "SizeBasis", "InterphaseShell",
            "STEEPENING_EFFECTS", "DENSE_FRACTION", "filler_fractions", "bruggeman"]

@@ -5,7 +5,7 @@ Every single-filler formulation of a parametrisation with one parameter per fill
 (:func:`~itr_identify.inference.calibrate.calibrate` with that one model): its best value,
 90 % interval and flag. Formulations that share a filler should agree within their
 intervals where the model holds; a trend with the fraction is a model-form error that the
-joint fit spreads over all of them (``itr_identify.inference.model_form``).
+joint fit spreads over all of them (``itr_identify.inference.misfit``).
 """
 
 from __future__ import annotations

@@ -245,7 +245,7 @@ class Posterior:
         The log-uniform prior's range, m^2 K/W.
     model_form_sd : float
         The relative model-form error the likelihood carried (0: none;
-        :mod:`itr_identify.inference.model_form`).
+        :mod:`itr_identify.inference.misfit`).
     log_evidence : float
         Log of the data's likelihood averaged over the prior, summed over the stages (a
         stage with no parameter of its own: its likelihood at the best values); what
@@ -489,7 +489,7 @@ def variance(standard_error: float, k: np.ndarray, err: np.ndarray, scatter: flo
     """Likelihood variance, (W/(m K))^2: replicate variance of the mean, RVE scatter, the
     model level's relative uncertainty ``model_sd`` (earlier stages' spread and faithful
     correction, :attr:`ForwardModel.model_sd`), the relative model-form error
-    ``model_form_sd`` (:mod:`itr_identify.inference.model_form`) and the surrogate's error
+    ``model_form_sd`` (:mod:`itr_identify.inference.misfit`) and the surrogate's error
     bound."""
     rel2 = scatter ** 2 + model_sd ** 2 + model_form_sd ** 2
     return standard_error ** 2 + rel2 * k ** 2 + err ** 2
@@ -570,7 +570,7 @@ def calibrate(models: Mapping[str, ForwardModel], measurements: Measurements, *,
         Seed of the sampling.
     model_form_sd : float
         Relative model-form error added to every formulation's likelihood variance (>= 0;
-        :mod:`itr_identify.inference.model_form` chooses it).
+        :mod:`itr_identify.inference.misfit` chooses it).
     prior : (float, float), optional
         The log-uniform prior's range of every resistance, m^2 K/W, inside the models'
         reduced-basis box (``settings.prior_m2K_per_W``; default: that box). The

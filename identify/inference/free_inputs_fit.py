@@ -29,7 +29,7 @@ import numpy as np
 from scipy.optimize import minimize
 
 from .joint import JointLikelihood
-from .model_form import MISFIT_P, chi_square_p
+from .misfit import MISFIT_P, chi_square_p
 
 __all__ = ["STARTS", "describe", "fit_with_inputs_free"]
 
@@ -108,7 +108,7 @@ def fit_with_inputs_free(likelihood: JointLikelihood, *, seed: int = 0,
     Returns
     -------
     dict
-        ``chi2``, ``dof``, ``p``, ``misfit`` (p below :data:`~.model_form.MISFIT_P`),
+        ``chi2``, ``dof``, ``p``, ``misfit`` (p below :data:`~.misfit.MISFIT_P`),
         ``chi2_data`` and ``chi2_inputs`` (the two sums), ``inputs_sd`` (each normal
         input's distance from its prior's centre in its sds, signed), ``at`` (the point:
         log10 R, ln k ratios, nm, shared terms in sd), ``per_formulation`` (each one's

@@ -227,7 +227,7 @@ def joint_fit_record(models: Mapping[str, ForwardModel], measurements: Measureme
                      post: Posterior, joint: JointPosterior,
                      model_form: ModelFormPrior, free: Mapping[str, Any]) -> dict:
     """The fit's test and its record. The test (``chi2``, ``dof``, ``p``, ``misfit`` below
-    :data:`~.model_form.MISFIT_P`) is ``free``'s: the model without the model form at its
+    :data:`~.misfit.MISFIT_P`) is ``free``'s: the model without the model form at its
     highest-posterior point, the inputs free within their priors
     (:func:`~.free_inputs_fit.fit_with_inputs_free`). Beside it, ``stated``: the chi-square
     at the points quoted with the stated inputs, without the model form and with its prior
@@ -235,7 +235,7 @@ def joint_fit_record(models: Mapping[str, ForwardModel], measurements: Measureme
     z)^2) k^2``); and the model form's posterior offsets and slopes per filler system
     (medians, relative)."""
     from .calibrate import residuals
-    from .model_form import MISFIT_P, chi_square_p
+    from .misfit import MISFIT_P, chi_square_p
 
     terms = residuals(models, measurements, post.best)
     dof = max(len(terms) - len(post.names), 1)
@@ -358,7 +358,7 @@ def alone_agreement(alone: list[dict]) -> dict[str, dict]:
     1.645); the weighted mean and the chi-square of the values about it on ``n - 1``
     degrees of freedom, its p-value (``agree``: p >= 0.01). Values at an end of the prior
     count with their one-sided interval's width."""
-    from .model_form import MISFIT_P, chi_square_p
+    from .misfit import MISFIT_P, chi_square_p
 
     by: dict[str, list[dict]] = {}
     for row in alone:

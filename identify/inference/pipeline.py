@@ -46,7 +46,7 @@ from .joint_fit import (
 )
 from .joint_fit import inputs_record as inputs_record_of
 from .measurements import Measurements
-from .model_form import misfit_note, with_model_form
+from .misfit import misfit_note, with_model_form
 from .nuisance import (
     DEFAULT_FILM,
     FilmPrior,
@@ -440,7 +440,7 @@ def _quadrature_identification(run: _Run, models: dict[str, ForwardModel], post:
                                priors: Mapping[str, InputPrior | FilmPrior],
                                seconds: dict[str, float]) -> Identification:
     """The identification of the earlier scheme: the grid calibration ``post`` with a
-    point-estimated model-form error (:func:`~.model_form.with_model_form`), the inputs
+    point-estimated model-form error (:func:`~.misfit.with_model_form`), the inputs
     ``priors`` integrated out by quadrature (:func:`~.nuisance.marginalise`), then the
     formulations alone and the paper's screening."""
     par, echo, measurements = run.par, run.echo, run.measurements

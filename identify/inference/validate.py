@@ -22,7 +22,7 @@ from itr_fv.materials import paper_data
 from ..forward.model import ForwardModel
 from .calibrate import Posterior, calibrate
 from .measurements import Measurements
-from .model_form import with_model_form
+from .misfit import with_model_form
 
 __all__ = ["validate", "leave_one_out", "posterior_prediction"]
 
@@ -93,7 +93,7 @@ def leave_one_out(models: Mapping[str, ForwardModel], measurements: Measurements
                   tick: Callable[[], None] | None = None, **calibrate_kw) -> list[dict]:
     """Identify without each formulation in turn and predict it (the calibration of the
     others carries a model-form error where their fit fails its chi-square test:
-    :func:`itr_identify.inference.model_form.with_model_form`).
+    :func:`itr_identify.inference.misfit.with_model_form`).
 
     Returns per formulation: measured mean, held-out prediction of the measured mean
     (median, 90 % interval: :func:`posterior_prediction`),

@@ -126,7 +126,7 @@ def _model_form_lines(d: Discrepancy) -> list[str]:
     mf = d.model_form
     if mf is None:
         return []
-    from ..discrepancy.model_form import AMPLITUDE_RANGE, LENGTH_RANGE
+    from ..discrepancy.gp_discrepancy import AMPLITUDE_RANGE, LENGTH_RANGE
 
     s, lo, hi = mf.amplitude
     lines = ["", "## Model-form term (no candidate named)", "",

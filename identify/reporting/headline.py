@@ -16,8 +16,8 @@ report's identifiability statements),
 - ``bounded on one side``: the interval reaches one end of the prior;
 
 then ``model misfit``: the data would determine it, but the fit fails its chi-square test
-(p below :data:`~itr_identify.inference.model_form.MISFIT_P`): its interval carries a
-model-form error (:mod:`itr_identify.inference.model_form`); ``voxel-specific``: a per-area
+(p below :data:`~itr_identify.inference.misfit.MISFIT_P`): its interval carries a
+model-form error (:mod:`itr_identify.inference.misfit`); ``voxel-specific``: a per-area
 contact resistance (``Rff``): determined, but a property of the voxel it was identified at
 (``validation/results/resolution_area.md``); ``determined``: none of these.
 
@@ -41,7 +41,7 @@ from itr_fv.materials.parameters import parse_parameter
 
 from ..forward.fidelity import fidelity_name
 from ..inference.calibrate import EDGE_FACTOR, UNDETERMINED_DECADES
-from ..inference.model_form import MISFIT_P, is_misfit, misfit_note
+from ..inference.misfit import MISFIT_P, is_misfit, misfit_note
 from ..inference.nuisance import narrowing
 from ..inference.pipeline import Identification
 from .error_budget import error_budget
@@ -87,7 +87,7 @@ def prior_ends(post, name: str) -> tuple[bool, bool]:
 def parameter_flag(ident: Identification, name: str) -> str:
     """The flag of parameter ``name`` of ``ident`` (one of :data:`FLAGS`): a value the data
     would determine is ``model misfit`` where its model fails its chi-square test
-    (:mod:`itr_identify.inference.model_form`), never ``determined``; ``determined`` only
+    (:mod:`itr_identify.inference.misfit`), never ``determined``; ``determined`` only
     where its 90 % interval is within x/:data:`DETERMINED_FACTOR`, else ``bounded (x/F)``."""
     flag = ident.posterior.determination(name)
     if flag != "determined":

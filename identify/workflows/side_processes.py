@@ -28,7 +28,7 @@ from concurrent.futures import ProcessPoolExecutor
 from contextlib import contextmanager
 from typing import Any
 
-from ..forward.workload import side_by_side_possible
+from ..forward.work_estimate import side_by_side_possible
 
 __all__ = ["identify_side_by_side", "side_by_side_possible", "tie_to"]
 

@@ -46,7 +46,7 @@ class Effect:
     scales_resistance : bool
         The effect acts, for one powder and any size of it, as a factor on the interface
         resistances: no measurement of k, density or mass fraction tells it from them, so
-        it is kept out of the tied set and said so (:mod:`.deciding`).
+        it is kept out of the tied set and said so (:mod:`.tie_breaking`).
     """
 
     key: str

@@ -24,7 +24,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .effect import Effect
+from .candidate import Effect
 from .fit import Group, ModelFit, fit_model
 from .observables import AuxGroup
 from .tables import ForwardTables
