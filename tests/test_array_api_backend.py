@@ -26,11 +26,11 @@ from itr_fft.array_api_backend import (
     resolve_device,
     to_numpy,
 )
+from itr_fv import homogenize
 from itr_fv.discrete.problem import DiscreteProblem
 from itr_fv.solvers.amg import assemble_operator
 from itr_fv.solvers.backends import backend_for
-from itr_fv.solvers.choice import solver_backend, worker_resources
-from itr_fv.solvers.driver import homogenize
+from itr_fv.solvers.choice import as_solver
 from validation.gallery import build, rve_cases
 
 CASES = [c.name for c in rve_cases()]
@@ -56,7 +56,7 @@ def _case(case):
 def _numba(case, preconditioner="fft"):
     """The numba backend's result (float64 FFTs), fields kept."""
     _, mat, problem, _ = _case(case)
-    return homogenize(problem, mat, backend=itr_fft.NumbaFFTBackend(
+    return homogenize(problem, mat, solver=itr_fft.NumbaFFTBackend(
         fft_dtype=np.float64, preconditioner=preconditioner), tol=TOL)
 
 
@@ -92,7 +92,7 @@ def _array_api(case, namespace, preconditioner="fft"):
     preparation) of the array-API backend."""
     _, mat, problem, _ = _case(case)
     backend = _Recording(device="cpu", namespace=namespace, preconditioner=preconditioner)
-    res = homogenize(problem, mat, backend=backend, tol=TOL)
+    res = homogenize(problem, mat, solver=backend, tol=TOL)
     return res, backend.loads, backend.conductances
 
 
@@ -156,9 +156,9 @@ def test_kernel_and_preconditioner_options_are_checked():
 
     if not fused_available():  # CI: no CUDA and no simulator in this process
         with refuses(ValueError, "kernels"):
-            homogenize(ms, mat, backend=ArrayAPIBackend(device="cpu", kernels="fused"),
+            homogenize(ms, mat, solver=ArrayAPIBackend(device="cpu", kernels="fused"),
                        tol=1e-8)
-    res = homogenize(ms, mat, backend=ArrayAPIBackend(device="cpu"), tol=1e-8)
+    res = homogenize(ms, mat, solver=ArrayAPIBackend(device="cpu"), tol=1e-8)
     assert res.info["kernels"] == "portable"  # "auto" on the CPU
 
 
@@ -171,7 +171,7 @@ def test_float32_ffts_with_float64_vectors(case):
     backend = backend_for("array_api", device="cpu", namespace="array_api_strict",
                           fft_dtype=np.float32)
     assert backend.options()["fft_dtype"] == "float32"
-    res = homogenize(ms, mat, backend=backend, tol=TOL, store_fields=False)
+    res = homogenize(ms, mat, solver=backend, tol=TOL, store_fields=False)
     assert res.info["fft_dtype"] == "float32" and res.info["dtype"] == "float64"
     assert res.converged and max(res.residuals) <= TOL
     assert _rel(res.k_eff, ref.k_eff) <= 1e-10
@@ -186,19 +186,19 @@ def test_float32_ffts_with_float64_vectors(case):
 
 def test_float32_vectors_under_the_strict_namespace():
     ms, mat, ref = _reference("al2o3_60")
-    res = homogenize(ms, mat, backend=ArrayAPIBackend(device="cpu", namespace="array_api_strict",
-                                                      dtype=np.float32),
+    res = homogenize(ms, mat, solver=ArrayAPIBackend(device="cpu", namespace="array_api_strict",
+                                                     dtype=np.float32),
                      tol=4e-6, store_fields=False)
     assert np.abs(res.k_eff - ref.k_eff).max() <= 1e-5 * np.abs(ref.k_eff).max()
     with refuses(ValueError, "tol"):
-        homogenize(ms, mat, backend=ArrayAPIBackend(device="cpu", dtype=np.float32),
+        homogenize(ms, mat, solver=ArrayAPIBackend(device="cpu", dtype=np.float32),
                    tol=1e-9)
 
 
 def test_registered_by_name_and_warm_start():
     ms, mat, ref = _reference("fcc_R1e-6")
-    res = homogenize(ms, mat, backend="array_api", tol=TOL)
-    warm = homogenize(ms, mat, backend="array_api", tol=TOL, x0=np.stack(res.theta))
+    res = homogenize(ms, mat, solver="array_api", tol=TOL)
+    warm = homogenize(ms, mat, solver="array_api", tol=TOL, x0=np.stack(res.theta))
     assert max(warm.iterations) <= 2
     assert np.abs(warm.k_eff - ref.k_eff).max() <= 1e-10 * np.abs(ref.k_eff).max()
 
@@ -219,12 +219,12 @@ def test_device_choices_are_checked():
 
 
 def test_solver_choices_for_the_campaign_engine():
-    assert worker_resources("gpu") == {"GPU": 1}
-    assert worker_resources("fft") is None and worker_resources("mg") is None
-    mg = solver_backend("mg", threads=1)
+    assert as_solver("gpu").resources == {"GPU": 1}
+    assert as_solver("fft").resources is None and as_solver("mg").resources is None
+    mg = as_solver("mg").backend(threads=1)
     assert mg.name == "itr_fft" and mg.preconditioner == "multigrid" and mg.workers == 1
     with refuses(ValueError, "solver"):
-        worker_resources("quantum")
+        as_solver("quantum")
 
 
 @pytest.mark.skipif(importlib.util.find_spec("cupy") is None,
@@ -236,8 +236,8 @@ def test_equals_the_numba_backend_on_a_gpu(case):
     ms, mat, ref = _reference(case)
     for options in ({"kernels": "portable"}, {"kernels": "auto"},
                     {"preconditioner": "multigrid"}):
-        res = homogenize(ms, mat, backend=ArrayAPIBackend(device="cuda", namespace="cupy",
-                                                          **options),
+        res = homogenize(ms, mat, solver=ArrayAPIBackend(device="cuda", namespace="cupy",
+                                                         **options),
                          tol=TOL, store_fields=False)
         assert res.info["device"] == "cuda"
         assert _rel(res.k_eff, ref.k_eff) <= 1e-10, options

@@ -22,10 +22,10 @@ from refusals import refuses
 
 import itr_fft  # noqa: F401  (registers the backends)
 from itr_fft.numba_backend import MIXED_MIN_TOL, NumbaFFTBackend
+from itr_fv import homogenize
 from itr_fv.discrete.operator import apply_operator, load_vector
 from itr_fv.discrete.problem import DiscreteProblem
 from itr_fv.solvers.backends import backend_for
-from itr_fv.solvers.driver import homogenize
 from itr_fv.solvers.krylov import block_conjugate_gradients, conjugate_gradients
 from validation.gallery import build, rve_cases
 
@@ -109,9 +109,9 @@ def _problem(case: str):
 @pytest.mark.parametrize("case", CASES)
 def test_numba_block_equals_one_load_case_at_a_time_on_the_common_set(case):
     problem, mat = _problem(case)
-    one = homogenize(problem, mat, backend=backend_for("itr_fft", block=False), tol=1e-10,
+    one = homogenize(problem, mat, solver=backend_for("itr_fft", block=False), tol=1e-10,
                      store_fields=True)
-    block = homogenize(problem, mat, backend=backend_for("itr_fft", block=True), tol=1e-10,
+    block = homogenize(problem, mat, solver=backend_for("itr_fft", block=True), tol=1e-10,
                        store_fields=True)
     assert block.info["block"] and not one.info["block"]
     assert block.iterations == one.iterations
@@ -146,8 +146,8 @@ def test_array_api_block_equals_single_solves(case, namespace):
 def test_mixed_precision_meets_its_tolerance_on_the_float64_residual(case):
     problem, mat = _problem(case)
     tol = 1e-8
-    double = homogenize(problem, mat, backend="itr_fft", tol=tol, store_fields=True)
-    mixed = homogenize(problem, mat, backend=backend_for("itr_fft", precision="mixed"),
+    double = homogenize(problem, mat, solver="itr_fft", tol=tol, store_fields=True)
+    mixed = homogenize(problem, mat, solver=backend_for("itr_fft", precision="mixed"),
                        tol=tol, store_fields=True)
     assert mixed.info["precision"] == "mixed" and mixed.converged
     g = problem.system(mat).g
@@ -162,7 +162,7 @@ def test_mixed_precision_meets_its_tolerance_on_the_float64_residual(case):
 def test_mixed_precision_refuses_what_it_cannot_reach():
     problem, mat = _problem("sc_R0")
     with refuses(ValueError, "tol"):
-        homogenize(problem, mat, backend=backend_for("itr_fft", precision="mixed"),
+        homogenize(problem, mat, solver=backend_for("itr_fft", precision="mixed"),
                    tol=MIXED_MIN_TOL / 10)
     with refuses(ValueError, "precision"):
         NumbaFFTBackend(precision="mixed", dtype=np.float32)

@@ -144,9 +144,9 @@ def test_the_film_raises_the_contact_resistance(cheap):
     """The same particles with thicker films conduct less, by the film's d/k_m added to
     every contact (k_iso falls monotonically, and a 5 nm film at R_b = 3e-8 moves it by
     more than the solver's tolerance)."""
+    from itr_fv import homogenize
     from itr_fv.discrete.problem import DiscreteProblem
     from itr_fv.materials import Materials
-    from itr_fv.solvers.driver import homogenize
 
     mat = Materials(conductivity={"silicone": 0.18, "AlN": 170.0},
                     resistance={("AlN", "silicone"): 3e-8}, matrix="silicone")

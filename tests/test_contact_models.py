@@ -7,9 +7,7 @@ import numpy as np
 import pytest
 from refusals import refuses
 
-import itr_fft
-import itr_fv
-from itr_fv import Materials, Microstructure, analytic
+from itr_fv import Materials, Microstructure, analytic, homogenize
 from itr_fv.checks import VoxelContactWarning
 from itr_fv.discrete.model import face_geometry
 from validation.gallery import touching_array
@@ -33,18 +31,18 @@ def gap_materials(kp=30.0, rb=2e-8, spots=None) -> Materials:
 
 
 @pytest.mark.parametrize("lattice", ["sc", "bcc", "fcc"])
-@pytest.mark.parametrize("solve", [itr_fv.homogenize, itr_fft.homogenize])
-def test_nearly_touching_arrays_match_the_multipole_reference(solve, lattice):
+@pytest.mark.parametrize("solver", ["fv", "fft"])
+def test_nearly_touching_arrays_match_the_multipole_reference(solver, lattice):
     """CI-size point of acceptance 1: h = a/8, 1.5 nm films, within 4 % (measured: SC -2.6 %,
     BCC -3.9 %, FCC -2.8 %; validation/results/gap_model.md)."""
     ms, f = touching_array(lattice, A, 1.5e-9, 8)
     ref = analytic.sphere_array(lattice, f, 30.0 / K_M, 2e-8 * K_M / A) * K_M
-    k = np.trace(solve(ms, gap_materials(), tol=1e-9).k_eff) / 3
+    k = np.trace(homogenize(ms, gap_materials(), solver=solver, tol=1e-9).k_eff) / 3
     assert k == pytest.approx(ref, rel=0.04)
 
 
-@pytest.mark.parametrize("solve", [itr_fv.homogenize, itr_fft.homogenize])
-def test_the_per_area_model_cannot_see_a_thin_film(solve):
+@pytest.mark.parametrize("solver", ["fv", "fft"])
+def test_the_per_area_model_cannot_see_a_thin_film(solver):
     ms, f = sc_cell(1.5e-9, 8)
     ref = analytic.sphere_array("sc", f, 30.0 / K_M, 2e-8 * K_M / A) * K_M
     # the per-area model with the same numbers has no film at all: it cannot see the 1.5 nm
@@ -52,15 +50,15 @@ def test_the_per_area_model_cannot_see_a_thin_film(solve):
                      {("Al2O3", "silicone"): 2e-8, ("Al2O3", "Al2O3"): 0.0}, "silicone",
                      contact="area")
     with pytest.warns(VoxelContactWarning, match="voxel"):
-        k_area = np.trace(solve(ms, area, tol=1e-9).k_eff) / 3
+        k_area = np.trace(homogenize(ms, area, solver=solver, tol=1e-9).k_eff) / 3
     assert k_area > 1.1 * ref
 
 
 def test_both_solvers_agree_under_the_gap_model_with_spots():
     ms, _ = sc_cell(1.5e-9, 8)
     mat = gap_materials(spots={("Al2O3", "Al2O3"): 2e-6})
-    a = itr_fv.homogenize(ms, mat, tol=1e-11)
-    b = itr_fft.homogenize(ms, mat, tol=1e-11)
+    a = homogenize(ms, mat, solver="fv", tol=1e-11)
+    b = homogenize(ms, mat, solver="fft", tol=1e-11)
     np.testing.assert_allclose(a.k_eff, b.k_eff, rtol=1e-6, atol=1e-8)
 
 
@@ -97,9 +95,9 @@ def test_contact_spots_total_is_one_conductance_per_touching_contact():
         total[per] = face_geometry(m, contact="gap").total_spot_conductance(mat)
     assert all(t == pytest.approx(3 * g_c) for t in total.values())  # 3 contacts per cell
     # the spots carry heat: k_eff rises with G_c, and is unchanged with G_c = 0
-    plain = itr_fft.homogenize(ms, gap_materials(), tol=1e-9)
-    with_spot = itr_fft.homogenize(ms, mat, tol=1e-9)
-    zero = itr_fft.homogenize(ms, gap_materials(spots={("Al2O3", "Al2O3"): 0.0}), tol=1e-9)
+    plain = homogenize(ms, gap_materials(), solver="fft", tol=1e-9)
+    with_spot = homogenize(ms, mat, solver="fft", tol=1e-9)
+    zero = homogenize(ms, gap_materials(spots={("Al2O3", "Al2O3"): 0.0}), solver="fft", tol=1e-9)
     assert with_spot.k_eff[0, 0] > 1.05 * plain.k_eff[0, 0]
     np.testing.assert_allclose(zero.k_eff, plain.k_eff, rtol=1e-12)
     # a film above the touch gap gets no spot
@@ -116,10 +114,10 @@ def test_gap_model_needs_particle_geometry_and_the_matrix_pairs():
     two = Microstructure.from_labels((pid > 0).astype(int), pid, voxel_m=1e-7,
                                      names=("silicone", "Al2O3"))
     with refuses(ValueError, "contact"):
-        itr_fft.homogenize(two, gap_materials(), tol=1e-8)
+        homogenize(two, gap_materials(), solver="fft", tol=1e-8)
     with pytest.raises(ValueError, match=r"resistance.*'Al2O3', 'silicone'"):
-        itr_fft.homogenize(ms, Materials({"silicone": K_M, "Al2O3": 30.0}, {}, "silicone",
-                                         contact="gap"), tol=1e-8)
+        homogenize(ms, Materials({"silicone": K_M, "Al2O3": 30.0}, {}, "silicone",
+                                 contact="gap"), solver="fft", tol=1e-8)
 
 
 def test_a_geometry_is_built_for_one_contact_model():
@@ -162,20 +160,20 @@ def test_one_discrete_problem_serves_many_parameter_sets():
     problem = DiscreteProblem(ms, contact="gap")
     for rb in (2e-8, 1e-7):
         mat = gap_materials(rb=rb)
-        reused = itr_fft.homogenize(problem, mat, tol=1e-10)
-        fresh = itr_fft.homogenize(ms, mat, tol=1e-10)
+        reused = homogenize(problem, mat, solver="fft", tol=1e-10)
+        fresh = homogenize(ms, mat, solver="fft", tol=1e-10)
         np.testing.assert_allclose(reused.k_eff, fresh.k_eff, rtol=1e-12)
         assert reused.info["contact"] == "gap"
         assert len(reused.info["restarts"]) == 3
         assert all(isinstance(r, int) and 0 <= r <= 5 for r in reused.info["restarts"])
-        fv = itr_fv.homogenize(problem, mat, tol=1e-10)
+        fv = homogenize(problem, mat, solver="fv", tol=1e-10)
         np.testing.assert_allclose(fv.k_eff, fresh.k_eff, rtol=1e-6, atol=1e-9)
     with refuses(ValueError, "mat"):
-        itr_fft.homogenize(problem, Materials({"silicone": K_M, "Al2O3": 30.0},
-                                              {("Al2O3", "silicone"): 2e-8}, "silicone",
-                                              contact="area"))
+        homogenize(problem, Materials({"silicone": K_M, "Al2O3": 30.0},
+                                      {("Al2O3", "silicone"): 2e-8}, "silicone",
+                                      contact="area"), solver="fft")
     with refuses(ValueError, "geometry"):
-        itr_fft.homogenize(problem, gap_materials(), geometry=problem.geometry)
+        homogenize(problem, gap_materials(), solver="fft", geometry=problem.geometry)
     with refuses(ValueError, "contact"):
         DiscreteProblem(ms, contact="film")
 
@@ -192,11 +190,11 @@ def test_the_gap_model_is_the_default():
     ms, f = sc_cell(1.5e-9, 8)
     assert DiscreteProblem(ms).contact == "gap" and face_geometry(ms).contact_model == "gap"
     ref = analytic.sphere_array("sc", f, 30.0 / K_M, 2e-8 * K_M / A) * K_M
-    k = np.trace(itr_fft.homogenize(ms, mat, tol=1e-9).k_eff) / 3
+    k = np.trace(homogenize(ms, mat, solver="fft", tol=1e-9).k_eff) / 3
     assert k == pytest.approx(ref, rel=0.04)
     pid = np.zeros((8, 8, 8), int)
     pid[:4], pid[4:] = 1, 2
     labels = Microstructure.from_labels((pid > 0).astype(int), pid, voxel_m=1e-7,
                                         names=("silicone", "Al2O3"))
     with pytest.raises(ValueError, match="contact='area'"):
-        itr_fv.homogenize(labels, mat)
+        homogenize(labels, mat, solver="fv")

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 from refusals import refuses
 
-import itr_fft
 import itr_fft.numba_backend as nb
 from itr_fft.multigrid import JOIN_PASSES, coupled_groups
+from itr_fv import homogenize, resolve_solver
 from validation.bench_gpu import aln_problem
 
 FILLER, MATRIX, RESISTIVE = 100.0, 1.0, 0.5
@@ -70,10 +70,10 @@ def test_touching_alN_at_zero_film_converges_in_about_half_the_iterations_with_t
     2026-11-29); the tensor the same to round-off."""
     problem, mat, _ = aln_problem(48)
     res = {}
+    multigrid = resolve_solver("fft", preconditioner="multigrid")
     for name, groups in (("ids", lambda g, ids: ids), ("coupled", coupled_groups)):
         monkeypatch.setattr(nb, "coupled_groups", groups)
-        res[name] = itr_fft.homogenize(problem, mat, tol=1e-8, store_fields=False,
-                                       preconditioner="multigrid")
+        res[name] = homogenize(problem, mat, solver=multigrid, tol=1e-8, store_fields=False)
     assert max(res["coupled"].iterations) <= 0.6 * min(res["ids"].iterations)
     k = res["ids"].k_eff
     scale = np.trace(k) / 3

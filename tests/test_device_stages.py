@@ -21,6 +21,7 @@ from refusals import refuses
 
 from itr_fft import _kernels as K
 from itr_fft.array_api_backend import ArrayAPIBackend, _Prepared, to_numpy
+from itr_fv import homogenize
 from itr_fv.discrete.connectivity import ClusterProjection
 from itr_fv.discrete.operator import (
     apply_operator,
@@ -33,7 +34,7 @@ from itr_fv.discrete.operator import (
 from itr_fv.discrete.problem import DiscreteProblem
 from itr_fv.solvers.amg import assemble_operator
 from itr_fv.solvers.backends import backend_for
-from itr_fv.solvers.driver import device_arrays, homogenize
+from itr_fv.solvers.driver import device_arrays
 from validation.gallery import build
 
 NAMESPACES = ["numpy", "array_api_strict"]
@@ -220,15 +221,15 @@ def test_no_field_comes_back_without_store_fields(monkeypatch):
     backend = backend_for("array_api", device="cpu", namespace="array_api_strict")
     ms, mat = build("al2o3_60", 12)
     seen = _count_conversions(monkeypatch, size=ms.material_ids.size)
-    res = homogenize(ms, mat, backend=backend, tol=1e-10, store_fields=False)
+    res = homogenize(ms, mat, solver=backend, tol=1e-10, store_fields=False)
     assert res.converged and seen == []  # conductances built there, nothing comes back
     ms, mat = build("random30_Rinf", 12)
-    res = homogenize(ms, mat, backend=backend, tol=1e-10, store_fields=False)
+    res = homogenize(ms, mat, solver=backend, tol=1e-10, store_fields=False)
     assert res.converged and np.isfinite(res.k_eff).all() and np.isfinite(res.k_eff_energy).all()
     # insulating faces: the conductances come to the host once, for the connected clusters
     assert seen == ["__dlpack__"]
     seen.clear()
-    fields = homogenize(ms, mat, backend=backend, tol=1e-10, store_fields=True)
+    fields = homogenize(ms, mat, solver=backend, tol=1e-10, store_fields=True)
     # theta and the face fluxes of each load case, each by to_host (through DLPack), and
     # the conductances once for the clusters
     assert seen.count("to_host") == 6 and seen.count("__dlpack__") == 7

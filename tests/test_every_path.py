@@ -16,10 +16,10 @@ import pytest
 
 import itr_fft  # noqa: F401  (registers the backends)
 from itr_fft.fft_pair import fftw_available
+from itr_fv import homogenize
 from itr_fv.discrete.problem import DiscreteProblem
 from itr_fv.solvers.backends import backend_for
-from itr_fv.solvers.choice import solver_backend
-from itr_fv.solvers.driver import homogenize
+from itr_fv.solvers.choice import as_solver
 from validation.gallery import build
 
 PATHS = {
@@ -39,15 +39,15 @@ PATHS = {
 def test_every_path_gives_the_reference_tensor_to_1e8(case, contact):
     ms, mat = build(case, 20, contact=contact)
     problem = DiscreteProblem.for_materials(ms, mat)
-    ref = homogenize(problem, mat, backend="itr_fv", tol=1e-10, store_fields=False).k_eff
+    ref = homogenize(problem, mat, solver="itr_fv", tol=1e-10, store_fields=False).k_eff
     scale = np.max(np.abs(ref))
     paths = dict(PATHS)
     if not fftw_available():
         paths.pop("itr_fft fftw")
-    gpu_small = solver_backend("gpu", voxels=math.prod(ms.shape))  # the cost model: CPU
+    gpu_small = as_solver("gpu").backend(voxels=math.prod(ms.shape))  # the cost model: CPU
     assert gpu_small.name == "itr_fft"
     backends = {name: backend_for(b, **opts) for name, (b, opts) in paths.items()}
     backends["gpu choice, small grid"] = gpu_small
     for name, backend in backends.items():
-        k = homogenize(problem, mat, backend=backend, tol=1e-10, store_fields=False).k_eff
+        k = homogenize(problem, mat, solver=backend, tol=1e-10, store_fields=False).k_eff
         assert np.max(np.abs(k - ref)) <= 1e-8 * scale, name

@@ -8,12 +8,10 @@ import numpy as np
 import pytest
 from refusals import refuses
 
-import itr_fft
 import itr_fv
-from itr_fv import ConvergenceError, Materials, Microstructure
+from itr_fv import ConvergenceError, Materials, Microstructure, homogenize, resolve_solver
 from itr_fv.discrete.model import apply_operator, face_conductances, load_vector
 from itr_fv.discrete.problem import DiscreteProblem
-from itr_fv.solvers import driver as solve
 from validation.gallery import build, rve_cases, sphere_array
 
 CASES = [c.name for c in rve_cases()]
@@ -25,7 +23,7 @@ BACKENDS = ["itr_fft", "scipy_fft"]
 @pytest.fixture(params=BACKENDS)
 def fft_solve(request):
     """``homogenize(ms, mat, **kw)`` on one FFT backend, through the one solve driver."""
-    return functools.partial(solve.homogenize, backend=request.param)
+    return functools.partial(homogenize, solver=request.param)
 
 
 def _rel(a: np.ndarray, b: np.ndarray) -> float:
@@ -43,7 +41,7 @@ def _common_case(name: str, contact: str):
                  else None)
         mat = build(name, "ci", contact="gap", contact_conductance=spots)[1]
     problem = DiscreteProblem.for_materials(ms, mat)
-    return problem, mat, itr_fv.homogenize(problem, mat, tol=1e-10, store_fields=False)
+    return problem, mat, homogenize(problem, mat, solver="fv", tol=1e-10, store_fields=False)
 
 
 @pytest.mark.parametrize("contact", ["area", "gap", "gap+spots"])
@@ -53,7 +51,7 @@ def test_fft_matches_fv_on_common_set(name, contact, fft_solve):
     problem, mat, fv = _common_case(name, contact)
     fft = fft_solve(problem, mat, tol=1e-10, store_fields=False)
     assert fft.converged and fv.converged
-    assert fft.solver == fft_solve.keywords["backend"]
+    assert fft.solver == fft_solve.keywords["solver"]
     assert _rel(np.diag(fft.k_eff), np.diag(fv.k_eff)) <= 1e-6
     assert _rel(fft.k_eff, fv.k_eff) <= 1e-6
     assert fft.floating.count == fv.floating.count
@@ -85,7 +83,7 @@ def test_iterations_do_not_grow_with_grid():
     its = []
     for n in (32, 64):
         ms, mat = sphere_array("fcc", n, 0.50, 1e-7)
-        res = itr_fft.homogenize(ms, mat, tol=1e-8, directions=(0,), store_fields=False)
+        res = homogenize(ms, mat, solver="fft", tol=1e-8, directions=(0,), store_fields=False)
         its.append(res.iterations[0])
     assert abs(its[1] - its[0]) <= 0.2 * its[0], its
 
@@ -130,7 +128,7 @@ def test_insulating_interfaces_floating_clusters(fft_solve):
     """R = inf: particles float; singular but consistent system converges; matches FV."""
     ms, mat = build("random30_Rinf", 24)
     fft = fft_solve(ms, mat, tol=1e-10)
-    fv = itr_fv.homogenize(ms, mat, tol=1e-10, store_fields=False)
+    fv = homogenize(ms, mat, solver="fv", tol=1e-10, store_fields=False)
     assert fft.converged and fft.floating.count == ms.n_particles
     assert _rel(fft.k_eff, fv.k_eff) <= 1e-6
     # insulating particles: below the matrix, no flux into the particles
@@ -142,19 +140,20 @@ def test_insulating_interfaces_floating_clusters(fft_solve):
 
 def test_float32_option_agrees():
     ms, mat = build("al2o3_60", "ci")
-    r64 = itr_fft.homogenize(ms, mat, tol=1e-10, store_fields=False)
-    r32 = itr_fft.homogenize(ms, mat, tol=2e-6, dtype=np.float32, store_fields=False)
+    r64 = homogenize(ms, mat, solver="fft", tol=1e-10, store_fields=False)
+    r32 = homogenize(ms, mat, solver=resolve_solver("fft", dtype=np.float32), tol=2e-6,
+                     store_fields=False)
     assert r32.converged and r32.info["dtype"] == "float32"
     assert _rel(r32.k_eff, r64.k_eff) <= 1e-6
     with refuses(ValueError, "tol"):
-        itr_fft.homogenize(ms, mat, tol=1e-7, dtype=np.float32)
+        homogenize(ms, mat, solver=resolve_solver("fft", dtype=np.float32), tol=1e-7)
 
 
 def test_reference_conductivity_does_not_change_iterations():
     """PCG is invariant to a constant scale of the preconditioner."""
     ms, mat = build("bcc_R1e-8", "ci")
-    its = {ref: itr_fft.homogenize(ms, mat, tol=1e-8, directions=(2,), reference=ref,
-                                   store_fields=False).iterations[0]
+    its = {ref: homogenize(ms, mat, solver=resolve_solver("fft", reference=ref), tol=1e-8,
+                           directions=(2,), store_fields=False).iterations[0]
            for ref in ("geometric", "min", "max", "arithmetic")}
     assert max(its.values()) - min(its.values()) <= 1, its
 
@@ -162,17 +161,18 @@ def test_reference_conductivity_does_not_change_iterations():
 def test_argument_checks_and_callback():
     ms, mat = build("sc_R0", 16)
     with refuses(ValueError, "dtype"):
-        itr_fft.homogenize(ms, mat, dtype=np.int32)
+        homogenize(ms, mat, solver=resolve_solver("fft", dtype=np.int32))
     with refuses(ValueError, "workers"):
-        itr_fft.homogenize(ms, mat, workers=0)
+        homogenize(ms, mat, solver=resolve_solver("fft", workers=0))
     with refuses(ValueError, "x0"):
-        itr_fft.homogenize(ms, mat, x0=np.zeros((2, 16, 16, 16)))
+        homogenize(ms, mat, solver="fft", x0=np.zeros((2, 16, 16, 16)))
     with refuses(ValueError, "tol"):
-        itr_fft.homogenize(ms, mat, tol=2.0)
+        homogenize(ms, mat, solver="fft", tol=2.0)
     with refuses(ValueError, "directions"):
-        itr_fft.homogenize(ms, mat, directions=(3,))
+        homogenize(ms, mat, solver="fft", directions=(3,))
     seen = []
-    res = itr_fft.homogenize(ms, mat, directions=(1,), callback=lambda *a: seen.append(a))
+    res = homogenize(ms, mat, solver="fft", directions=(1,),
+                     callback=lambda *a: seen.append(a))
     assert [s[1] for s in seen] == list(range(1, res.iterations[0] + 1))
     assert all(s[0] == 1 for s in seen)
     assert np.isnan(res.k_eff[:, 0]).all() and np.isfinite(res.k_eff[:, 1]).all()

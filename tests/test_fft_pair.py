@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 from refusals import refuses
 
-import itr_fft
 import itr_fft.numba_backend as nb
 from itr_fft.fft_pair import _PLANS, PLANS_KEPT, fft_pair
+from itr_fv import homogenize, resolve_solver
 from validation.gallery import build
 
 pytest.importorskip("pyfftw")
@@ -35,8 +35,8 @@ def test_fftw_pair_is_scipys_transform_pair_on_odd_and_even_grids(dtype, tol):
 
 def test_a_solve_with_fftw_takes_scipys_iterations_and_tensor():
     ms, mat = build("al2o3_60", 24, contact="gap")
-    res = {fft: itr_fft.homogenize(ms, mat, tol=1e-10, store_fields=False,
-                                   preconditioner="fft", fft=fft) for fft in ("scipy", "fftw")}
+    res = {fft: homogenize(ms, mat, solver=resolve_solver("fft", preconditioner="fft", fft=fft),
+                           tol=1e-10, store_fields=False) for fft in ("scipy", "fftw")}
     assert res["fftw"].iterations == res["scipy"].iterations
     assert res["fftw"].info["fft"] == "fftw"
     k = res["scipy"].k_eff

@@ -7,7 +7,7 @@ import pytest
 from conftest import sc_sphere
 from refusals import refuses
 
-from itr_fv import Materials, Microstructure, homogenize
+from itr_fv import Materials, Microstructure, homogenize, resolve_solver
 
 K = {"matrix": 1.0, "filler": 10.0}
 R = {("filler", "matrix"): 1e-3}
@@ -89,26 +89,26 @@ def test_bad_microstructures(build, name):
     ({"directions": ()}, "directions"),
     ({"x0": np.zeros((3, 4, 4, 4))}, "x0"),
     ({"callback": 5}, "callback"),
-    ({"amg": "gmres"}, "amg"),
+    ({"solver": resolve_solver("fv", amg="gmres")}, "amg"),
 ])
 def test_bad_solver_arguments(kwargs, name):
     ms = sc_sphere(8, 0.2)
     with refuses(ValueError, name):
-        homogenize(ms, Materials(K, R, "matrix"), **kwargs)
+        homogenize(ms, Materials(K, R, "matrix"), **{"solver": "fv", **kwargs})
 
 
 def test_unknown_phase_and_missing_pair_are_named():
     ms = sc_sphere(8, 0.2)
     with pytest.raises(ValueError, match="'filler'"):
-        homogenize(ms, Materials({"matrix": 1.0, "glass": 2.0}, {}, "matrix"))
+        homogenize(ms, Materials({"matrix": 1.0, "glass": 2.0}, {}, "matrix"), solver="fv")
     with pytest.raises(ValueError, match=r"resistance.*\('filler', 'matrix'\)"):
-        homogenize(ms, Materials(K, {}, "matrix"))
-    with refuses(ValueError, "mat"):
-        homogenize(ms, Materials({"silicone": 1.0, "filler": 2.0}, {}, "silicone"))
-    with refuses(ValueError, "mat"):
-        homogenize(ms, {"matrix": 1.0})
-    with pytest.raises(ValueError, match="ms"):
-        homogenize(np.zeros((4, 4, 4)), Materials(K, R, "matrix"))
+        homogenize(ms, Materials(K, {}, "matrix"), solver="fv")
+    with refuses(ValueError, "materials"):
+        homogenize(ms, Materials({"silicone": 1.0, "filler": 2.0}, {}, "silicone"), solver="fv")
+    with refuses(ValueError, "materials"):
+        homogenize(ms, {"matrix": 1.0}, solver="fv")
+    with refuses(ValueError, "problem"):
+        homogenize(np.zeros((4, 4, 4)), Materials(K, R, "matrix"), solver="fv")
 
 
 def test_contact_pair_is_required_only_when_particles_touch():
@@ -120,11 +120,12 @@ def test_contact_pair_is_required_only_when_particles_touch():
     pid[3:5, 1:3, 1:3] = 2   # touches particle 1 across x = 3
     ms = Microstructure.from_labels(mid, pid, 1e-6, ("matrix", "filler"))
     with pytest.raises(ValueError, match=r"\('filler', 'filler'\)"):
-        homogenize(ms, Materials(K, R, "matrix", contact="area"))
+        homogenize(ms, Materials(K, R, "matrix", contact="area"), solver="fv")
     pid[3:5, 1:3, 1:3] = 0
     mid[3:5, 1:3, 1:3] = 0
     ms = Microstructure.from_labels(mid, pid, 1e-6, ("matrix", "filler"))
-    assert homogenize(ms, Materials(K, R, "matrix", contact="area"), tol=1e-10).converged
+    assert homogenize(ms, Materials(K, R, "matrix", contact="area"), solver="fv",
+                      tol=1e-10).converged
 
 
 def test_non_convergence_raises_and_can_be_accepted():
@@ -132,8 +133,8 @@ def test_non_convergence_raises_and_can_be_accepted():
     ms = sc_sphere(16, 0.3)
     mat = Materials({"matrix": 1.0, "filler": 170.0}, {("filler", "matrix"): 0.0}, "matrix")
     with pytest.raises(ConvergenceError) as info:
-        homogenize(ms, mat, tol=1e-12, maxiter=1)
+        homogenize(ms, mat, solver="fv", tol=1e-12, maxiter=1)
     assert not info.value.result.converged
     with pytest.warns(RuntimeWarning, match="not converged"):
-        res = homogenize(ms, mat, tol=1e-12, maxiter=1, strict=False)
+        res = homogenize(ms, mat, solver="fv", tol=1e-12, maxiter=1, strict=False)
     assert not res.converged and res.iterations[0] == 1 and res.residuals[0] > 1e-12

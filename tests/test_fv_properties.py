@@ -35,7 +35,7 @@ def test_random_laminate_obeys_series_and_parallel_rules(layers, axis, r_am, r_b
     view[axis] = mid.size
     ms = Microstructure.from_labels(np.broadcast_to(mid.reshape(view), shape).copy(),
                                     np.broadcast_to(pid.reshape(view), shape).copy(), h, PHASES)
-    res = homogenize(ms, Materials(K, R, "matrix", contact="area"), tol=1e-12)
+    res = homogenize(ms, Materials(K, R, "matrix", contact="area"), solver="fv", tol=1e-12)
     # series rule: bulk resistance of every voxel plus R at every face between different ids
     series = sum(h / K[PHASES[m]] for m in mid)
     for j in range(mid.size):

@@ -25,16 +25,17 @@ def test_neutral_inclusion_is_invisible(k_ratio):
     """R k_m / a = 1 - k_m / k_p makes the coated sphere invisible: k_eff = k_m."""
     f = 0.3
     R = (1.0 - 1.0 / k_ratio) * radius(f)
-    res = homogenize(sc_sphere(64, f), sc_materials(k_ratio, R), tol=1e-10, directions=(0,))
+    res = homogenize(sc_sphere(64, f), sc_materials(k_ratio, R), solver="fv", tol=1e-10,
+                     directions=(0,))
     assert res.k_eff[0, 0] == pytest.approx(1.0, rel=0.01)
     # and without the correction the same sphere is clearly visible (resistance too low)
-    off = homogenize(sc_sphere(64, f), sc_materials(k_ratio, R), tol=1e-10, directions=(0,),
-                     staircase=False)
+    off = homogenize(sc_sphere(64, f), sc_materials(k_ratio, R), solver="fv", tol=1e-10,
+                     directions=(0,), staircase=False)
     assert off.k_eff[0, 0] > 1.03
 
 
 def test_sc_perfect_interface_matches_rayleigh():
-    res = homogenize(sc_sphere(64, 0.3), sc_materials(10.0, 0.0), tol=1e-10)
+    res = homogenize(sc_sphere(64, 0.3), sc_materials(10.0, 0.0), solver="fv", tol=1e-10)
     np.testing.assert_allclose(np.diag(res.k_eff), SC_PERFECT, rtol=0.005)
     # cubic symmetry of the array: isotropic, no off-diagonal
     assert np.ptp(np.diag(res.k_eff)) < 1e-8
@@ -45,8 +46,8 @@ def test_sc_interface_resistance_needs_staircase_correction():
     f = 0.3
     mat = sc_materials(10.0, 0.5 * radius(f))
     ms = sc_sphere(96, f)
-    on = homogenize(ms, mat, tol=1e-10, directions=(0,))
-    off = homogenize(ms, mat, tol=1e-10, directions=(0,), staircase=False)
+    on = homogenize(ms, mat, solver="fv", tol=1e-10, directions=(0,))
+    off = homogenize(ms, mat, solver="fv", tol=1e-10, directions=(0,), staircase=False)
     err_on = abs(on.k_eff[0, 0] / SC_ALPHA_05 - 1.0)
     err_off = abs(off.k_eff[0, 0] / SC_ALPHA_05 - 1.0)
     assert err_on < 0.01
@@ -62,7 +63,8 @@ def test_random_polydisperse_tensor_symmetric_and_isotropic():
                      ("A", "A"): 0.1, ("B", "B"): 0.1}, matrix="matrix")
     means, spreads = [], []
     for seed in range(3):
-        res = homogenize(random_spheres(48, 0.2, seed, r_range=(0.06, 0.11)), mat, tol=1e-10)
+        res = homogenize(random_spheres(48, 0.2, seed, r_range=(0.06, 0.11)), mat, solver="fv",
+                         tol=1e-10)
         assert res.symmetry_error < 1e-8
         np.testing.assert_allclose(res.k_eff, res.k_eff_energy, rtol=1e-8, atol=1e-10)
         diag = np.diag(res.k_eff)
@@ -85,8 +87,8 @@ def test_label_image_staircase_estimate_close_to_analytic_normals():
     ms = sc_sphere(48, f)
     labels = Microstructure.from_labels(ms.material_ids, ms.particle_ids, ms.voxel_m, ms.names)
     mat = sc_materials(10.0, 0.5 * radius(f))
-    analytic = homogenize(ms, mat, tol=1e-10, directions=(0,)).k_eff[0, 0]
-    image = homogenize(labels, mat, tol=1e-10, directions=(0,))
+    analytic = homogenize(ms, mat, solver="fv", tol=1e-10, directions=(0,)).k_eff[0, 0]
+    image = homogenize(labels, mat, solver="fv", tol=1e-10, directions=(0,))
     assert image.info["staircase"] == "image"
     assert image.k_eff[0, 0] == pytest.approx(analytic, rel=0.005)
     assert image.k_eff[0, 0] == pytest.approx(SC_ALPHA_05, rel=0.01)
@@ -107,8 +109,8 @@ def test_sphere_touching_its_own_image_gets_contact_resistance():
     eight = Microstructure.from_spheres(c, np.full(8, a), "filler", box_m=2 * L, shape=48,
                                         matrix="matrix")
     np.testing.assert_array_equal(eight.material_ids[:24, :24, :24], one.material_ids)
-    k1 = homogenize(one, mat, tol=1e-10, directions=(0,)).k_eff[0, 0]
-    k8 = homogenize(eight, mat, tol=1e-10, directions=(0,)).k_eff[0, 0]
+    k1 = homogenize(one, mat, solver="fv", tol=1e-10, directions=(0,)).k_eff[0, 0]
+    k8 = homogenize(eight, mat, solver="fv", tol=1e-10, directions=(0,)).k_eff[0, 0]
     assert k1 == pytest.approx(k8, rel=1e-7)
     # the resistive bridges keep it near the multipole value 0.72252 (alpha = 2), far from
     # the perfectly conducting bridge (several times larger)

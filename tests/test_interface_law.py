@@ -9,9 +9,7 @@ import numpy as np
 import pytest
 from refusals import refuses
 
-import itr_fft
-import itr_fv
-from itr_fv import Materials, Microstructure, analytic
+from itr_fv import Materials, Microstructure, analytic, homogenize
 from itr_fv.discrete.cut_cells import SHARES, surface_cuts
 from itr_fv.discrete.face_geometry import face_geometry
 from itr_fv.discrete.interface_law import (
@@ -122,8 +120,8 @@ def test_perfect_interfaces_lose_the_voxelization_jitter():
     ref = analytic.sphere_array("sc", f, 170.0, 0.0)
     errs = {}
     for law in LAW_NAMES:
-        res = itr_fft.homogenize(DiscreteProblem(ms, contact="gap", interface=law), mat,
-                                 tol=1e-9, directions=(0,))
+        res = homogenize(DiscreteProblem(ms, contact="gap", interface=law), mat, solver="fft",
+                         tol=1e-9, directions=(0,))
         errs[law] = res.k_eff[0, 0] / ref - 1
     assert abs(errs["segment"]) < 0.003
     assert abs(errs["staircase"]) > 2 * abs(errs["segment"])
@@ -134,8 +132,8 @@ def test_both_solvers_agree_under_the_segment_law(share):
     ms, _ = touching_array("fcc", 1.5e-6, 1.5e-9, 8)
     mat = gap_materials(spots={("Al2O3", "Al2O3"): 2e-6})
     problem = DiscreteProblem(ms, contact="gap", interface=SegmentLaw(share=share))
-    k_fv = itr_fv.homogenize(problem, mat, tol=1e-11).k_eff
-    k_fft = itr_fft.homogenize(problem, mat, tol=1e-11).k_eff
+    k_fv = homogenize(problem, mat, solver="fv", tol=1e-11).k_eff
+    k_fft = homogenize(problem, mat, solver="fft", tol=1e-11).k_eff
     np.testing.assert_allclose(k_fft, k_fv, rtol=1e-6, atol=1e-6 * np.abs(k_fv).max())
 
 
@@ -146,8 +144,8 @@ def test_nearly_touching_arrays_under_the_segment_law():
     for lattice in ("sc", "bcc", "fcc"):
         ms, f = touching_array(lattice, 1.5e-6, 1.5e-9, 8)
         ref = analytic.sphere_array(lattice, f, 30.0 / K_M, 2e-8 * K_M / 1.5e-6) * K_M
-        res = itr_fft.homogenize(DiscreteProblem(ms, contact="gap", interface="segment"),
-                                 gap_materials(), tol=1e-9)
+        res = homogenize(DiscreteProblem(ms, contact="gap", interface="segment"),
+                         gap_materials(), solver="fft", tol=1e-9)
         assert np.trace(res.k_eff) / 3 == pytest.approx(ref, rel=0.06)
 
 

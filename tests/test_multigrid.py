@@ -16,8 +16,8 @@ import itr_fft
 from itr_fft import _mg_kernels as MG
 from itr_fft.deflation import ParticleDeflation, group_operator
 from itr_fft.multigrid import AggregationMultigrid, _dense_operator
+from itr_fv import homogenize
 from itr_fv.discrete.problem import DiscreteProblem
-from itr_fv.solvers.driver import homogenize
 from validation.gallery import build, rve_cases
 
 
@@ -120,9 +120,9 @@ def test_group_operator_is_z_transpose_a_z():
 @pytest.mark.parametrize("case", [c.name for c in rve_cases()])
 def test_solution_does_not_depend_on_the_preconditioner(case):
     ms, mat = build(case, "ci")
-    ref = homogenize(ms, mat, backend=itr_fft.NumbaFFTBackend(preconditioner="fft"), tol=1e-10,
+    ref = homogenize(ms, mat, solver=itr_fft.NumbaFFTBackend(preconditioner="fft"), tol=1e-10,
                      store_fields=False)
-    res = homogenize(ms, mat, backend=itr_fft.NumbaFFTBackend(preconditioner="multigrid"),
+    res = homogenize(ms, mat, solver=itr_fft.NumbaFFTBackend(preconditioner="multigrid"),
                      tol=1e-10, store_fields=False)
     scale = np.abs(ref.k_eff).max()
     assert np.abs(res.k_eff - ref.k_eff).max() <= 1e-8 * scale
@@ -133,10 +133,10 @@ def test_fewer_iterations_at_high_contrast_with_resistive_interfaces():
     """AlN/silicone (contrast ~1100), gap model, 48^3: the FFT Laplacian needs ~4x more."""
     ms, mat = build("aln_60", 48, contact="gap")
     problem = DiscreteProblem.for_materials(ms, mat)
-    fft = homogenize(problem, mat, backend=itr_fft.NumbaFFTBackend(preconditioner="fft"),
+    fft = homogenize(problem, mat, solver=itr_fft.NumbaFFTBackend(preconditioner="fft"),
                      tol=1e-8,
                      directions=(0,), store_fields=False)
-    mg = homogenize(problem, mat, backend=itr_fft.NumbaFFTBackend(preconditioner="multigrid"),
+    mg = homogenize(problem, mat, solver=itr_fft.NumbaFFTBackend(preconditioner="multigrid"),
                     tol=1e-8, directions=(0,), store_fields=False)
     assert mg.iterations[0] <= 40
     assert mg.iterations[0] * 3 <= fft.iterations[0]
@@ -148,10 +148,10 @@ def test_tight_tolerance_is_reached_with_the_float32_hierarchy():
     (a null-space mode), the round-off sum of the residual came back as a large constant
     in z and CG diverged after reaching 5e-12."""
     ms, mat = build("aln_60", "ci", contact="gap")
-    ref = homogenize(ms, mat, backend=itr_fft.NumbaFFTBackend(preconditioner="fft",
-                                                              fft_dtype=np.float64),
+    ref = homogenize(ms, mat, solver=itr_fft.NumbaFFTBackend(preconditioner="fft",
+                                                             fft_dtype=np.float64),
                      tol=1e-12, store_fields=False)
-    res = homogenize(ms, mat, backend=itr_fft.NumbaFFTBackend(preconditioner="multigrid"),
+    res = homogenize(ms, mat, solver=itr_fft.NumbaFFTBackend(preconditioner="multigrid"),
                      tol=1e-12, store_fields=False)
     assert res.converged and max(res.residuals) <= 1e-12
     assert np.abs(res.k_eff - ref.k_eff).max() <= 1e-10 * np.abs(ref.k_eff).max()
@@ -168,7 +168,7 @@ def test_auto_takes_the_multigrid_at_high_bulk_contrast():
         ms, mat = build(case, 16)
         system = DiscreteProblem.for_materials(ms, mat).system(mat)
         assert choose_preconditioner(system) == kind, case
-        res = homogenize(ms, mat, backend=itr_fft.NumbaFFTBackend(), tol=1e-6,
+        res = homogenize(ms, mat, solver=itr_fft.NumbaFFTBackend(), tol=1e-6,
                          directions=(0,), store_fields=False)
         assert res.info["preconditioner"] == kind
 

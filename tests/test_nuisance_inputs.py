@@ -135,11 +135,11 @@ def test_a_prior_off_the_models_conductivity_is_refused(models):
 def test_the_scaling_law_holds_on_a_real_rve():
     """k(lam k_m, lam k_f, R / lam) = lam k(k_m, k_f, R) on a packed AlN RVE (the gap model,
     two solves)."""
+    from itr_fv import homogenize
     from itr_fv.discrete.problem import DiscreteProblem
     from itr_fv.materials import Materials
     from itr_fv.rve import FillerSpec, build_rve
     from itr_fv.rve.spec import RVESpec
-    from itr_fv.solvers.driver import homogenize
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")

@@ -23,7 +23,7 @@ from itr_fv.run_folder import begin_run, write_manifest
 @pytest.fixture(scope="module")
 def small_result():
     mat = Materials({"matrix": 1.0, "filler": 10.0}, {("filler", "matrix"): 0.02}, "matrix")
-    return homogenize(sc_sphere(12, 0.2), mat, tol=1e-10)
+    return homogenize(sc_sphere(12, 0.2), mat, solver="fv", tol=1e-10)
 
 
 # ------------------------------------------------------------------- micrometres as metres
@@ -38,14 +38,14 @@ def test_micrometres_passed_as_metres_warn_and_name_the_unit():
     mat = Materials({"silicone": 0.18, "Al2O3": 30.0}, {("Al2O3", "silicone"): 2e-6},
                     matrix="silicone")
     with pytest.warns(PhysicalScaleWarning, match=r"voxel_m.*metres.*micrometres"):
-        wrong = homogenize(_rve(0.3125), mat, tol=1e-8)
+        wrong = homogenize(_rve(0.3125), mat, solver="fv", tol=1e-8)
     with warnings.catch_warnings():
         warnings.simplefilter("error", PhysicalScaleWarning)  # the right unit: no warning
-        right = homogenize(_rve(0.3125e-6), mat, tol=1e-8)
+        right = homogenize(_rve(0.3125e-6), mat, solver="fv", tol=1e-8)
     # what the warning protects against: taken as metres the interface vanishes (k_eff is
     # that of a perfect interface) and k_eff comes out too high
     perfect = homogenize(_rve(0.3125e-6), mat.with_values(resistance={("Al2O3", "silicone"): 0}),
-                         tol=1e-8)
+                         solver="fv", tol=1e-8)
     assert wrong.k_eff[0, 0] == pytest.approx(perfect.k_eff[0, 0], rel=1e-4)
     assert wrong.k_eff[0, 0] > 1.05 * right.k_eff[0, 0]
 
@@ -55,7 +55,7 @@ def test_large_voxels_without_interface_resistance_do_not_warn():
                     matrix="silicone")
     with warnings.catch_warnings():
         warnings.simplefilter("error", PhysicalScaleWarning)
-        homogenize(_rve(0.01), mat, tol=1e-8)
+        homogenize(_rve(0.01), mat, solver="fv", tol=1e-8)
 
 
 # ---------------------------------------------------------------------- booleans, names
