@@ -5,7 +5,9 @@ Two fixed RVEs at 128^3 (16 um boxes of 0.125 um voxels, Table 1's Al2O3 and AlN
 packing seed 1, made once by this package and voxelised by each version from the same sphere
 table with ``Microstructure.from_spheres``), per-area contacts (R_b of Table 1's pairs,
 R_ff = 2e-7 m^2 K/W), solved with the public API at its default arguments,
-``itr_fft.homogenize(ms, mat, tol=1e-8)`` (three load cases), by this checkout and by a git
+``homogenize(ms, mat, tol=1e-8)`` with the FFT solver (three load cases: here
+``itr_fv.homogenize(ms, mat, solver="fft", tol=1e-8)``, at fe0a979
+``itr_fft.homogenize(ms, mat, tol=1e-8)``), by this checkout and by a git
 worktree of fe0a979, alternately, each run in a fresh process after a 24^3 warm-up (numba's
 compiled kernels come from each version's cache), on the machine's threads. The figure is
 the median wall of ``--repeats`` runs per version.
@@ -88,17 +90,30 @@ def voxelised(table: Path, n: int):
 
 def child(table: Path, name: str, n: int, fft: str | None = None) -> dict:
     """In a fresh process of one version: voxelise, warm up, time the default solve (with
-    ``fft`` where given: this checkout's optional FFT pair)."""
-    import itr_fft
+    ``fft`` where given: this checkout's optional FFT pair). The same backend in both
+    versions: here the one door with the ``"fft"`` solver, at fe0a979 (no
+    ``itr_fv.resolve_solver`` yet) ``itr_fft.homogenize``."""
+    extra = {} if fft is None else {"fft": fft}
+    try:
+        from itr_fv import homogenize, resolve_solver
+    except ImportError:  # the baseline checkout
+        import itr_fft
+
+        def solve(ms):
+            return itr_fft.homogenize(ms, mat, tol=1e-8, **extra)
+    else:
+        fft_solver = resolve_solver("fft", **extra)
+
+        def solve(ms):
+            return homogenize(ms, mat, solver=fft_solver, tol=1e-8)
 
     mat = materials(name)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        extra = {} if fft is None else {"fft": fft}
-        itr_fft.homogenize(voxelised(table, 24), mat, tol=1e-8, **extra)
+        solve(voxelised(table, 24))
         ms = voxelised(table, n)
         t = time.perf_counter()
-        res = itr_fft.homogenize(ms, mat, tol=1e-8, **extra)
+        res = solve(ms)
         wall = time.perf_counter() - t
     return {"wall_s": wall, "iterations": [int(i) for i in res.iterations],
             "k_eff": np.asarray(res.k_eff).tolist(),

@@ -13,7 +13,7 @@ that would not fit is skipped and said so):
    bandwidth; whether the fused kernels run, else why not;
 2. the small grids (``al2o3_60`` at 48^3 and 96^3) on the device and on the CPU's default
    solver, each against the cost model that sends small grids to the CPU
-   (:func:`itr_fv.solvers.choice.grid_solver`); then ``al2o3_60`` of the common RVE set at 512^3 (gap model), three load cases, tol 1e-8, the
+   (:meth:`itr_fv.solvers.choice.Solver.for_grid`); then ``al2o3_60`` of the common RVE set at 512^3 (gap model), three load cases, tol 1e-8, the
    array-API backend as ``auto`` takes it (``kernels="auto"``) and with the portable
    kernels: CG (sum of the load cases' solve times), wall, iterations, ms per iteration;
 3. AlN-60 in a 64 um box at 0.125 um (512^3, Table 1's AlN, R = 3e-8 m^2 K/W, gap model):
@@ -190,7 +190,7 @@ def solver_rows(rep: Report, n: int, device: str, budget: Budget) -> tuple | Non
 def on_device_small(rep: Report, device: str, budget: Budget) -> bool:
     """Rows of the small grids the cost model sends to the CPU: al2o3_60 at 48^3 and 96^3
     on the device and on the CPU's default solver, each against the model."""
-    from itr_fv.solvers.choice import grid_solver
+    from itr_fv.solvers.choice import as_solver
 
     if not budget.allows(30, "small grids: device against CPU", rep.log):
         return False
@@ -205,17 +205,16 @@ def on_device_small(rep: Report, device: str, budget: Budget) -> bool:
         rep.row(f"al2o3_60 {n}^3 on {device} / on the CPU", None, dev["wall_s"],
                 f"CPU {cpu:.2f} s ({res.info.get('workers')} threads); the cost model "
                 f"{model_s(n, device):.2f} / {model_s(n, 'cpu'):.2f} s, routes it to "
-                f"{grid_solver('gpu', n ** 3)}")
+                f"{as_solver('gpu').for_grid(n ** 3).key}")
     return True
 
 
 def homogenize_cpu(problem, mat):
     """The CPU's default solve (``fft``) of ``problem``."""
-    from itr_fv.solvers.choice import solver_backend
-    from itr_fv.solvers.driver import homogenize
+    from itr_fv import homogenize
 
-    return homogenize(problem, mat, backend=solver_backend("fft"), tol=1e-8,
-                      store_fields=False, check_memory=False)
+    return homogenize(problem, mat, solver="fft", tol=1e-8, store_fields=False,
+                      check_memory=False)
 
 
 def command_row(rep: Report, label: str, args: list[str], goal_s: float,

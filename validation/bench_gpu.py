@@ -57,14 +57,13 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 import itr_fft  # noqa: E402,F401  (registers the backends)
-from itr_fv import Materials  # noqa: E402
+from itr_fv import Materials, homogenize  # noqa: E402
 from itr_fv.discrete.problem import DiscreteProblem  # noqa: E402
 from itr_fv.materials.paper_data import PAPER_SYSTEM  # noqa: E402
 from itr_fv.rve import FillerSpec, build_rve  # noqa: E402
 from itr_fv.rve.spec import RVESpec  # noqa: E402
 from itr_fv.solvers.backends import backend_for  # noqa: E402
 from itr_fv.solvers.devices import cuda_device_count  # noqa: E402
-from itr_fv.solvers.driver import homogenize  # noqa: E402
 from validation.gallery import build  # noqa: E402
 
 RESULTS = ROOT / "validation" / "results"
@@ -135,7 +134,7 @@ def solve(problem: DiscreteProblem, mat: Materials, options: dict, tol: float = 
     """Three load cases on one backend: times, iterations, the tensor."""
     backend = backend_for("array_api", **options)
     t = time.perf_counter()
-    res = homogenize(problem, mat, backend=backend, tol=tol, store_fields=False,
+    res = homogenize(problem, mat, solver=backend, tol=tol, store_fields=False,
                      check_memory=False)
     wall = time.perf_counter() - t
     cg = float(sum(res.solve_times))
@@ -178,7 +177,7 @@ def run_steps(n: int, device: str, facts: dict, budget: Budget, log) -> dict:
             solve(warm, mat, opts)
         except Exception as err:  # noqa: BLE001 - a path that cannot run is reported
             log(f"warm-up {name}: {type(err).__name__}: {err}")
-    ref = homogenize(warm, mat, backend="itr_fft", tol=1e-12, store_fields=False).k_eff
+    ref = homogenize(warm, mat, solver="itr_fft", tol=1e-12, store_fields=False).k_eff
     small = solve(warm, mat, ways["new"], tol=1e-12)
     out["small_vs_numba"] = rel(small["k_eff"], ref)
     log(f"32^3 al2o3_60 at tol 1e-12: new path vs the numba CPU backend, max relative "

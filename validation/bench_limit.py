@@ -77,10 +77,10 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 import itr_fft  # noqa: E402,F401  (registers the backends)
+from itr_fv import homogenize  # noqa: E402
 from itr_fv.discrete.problem import DiscreteProblem  # noqa: E402
 from itr_fv.solvers.backends import backend_for  # noqa: E402
 from itr_fv.solvers.devices import cuda_device_count  # noqa: E402
-from itr_fv.solvers.driver import homogenize  # noqa: E402
 from validation.bench_gpu import aln_problem  # noqa: E402
 from validation.bench_preconditioners import faithful_aln  # noqa: E402
 from validation.gallery import build, rve_cases  # noqa: E402
@@ -186,7 +186,7 @@ def solve(problem: DiscreteProblem, mat, options: dict, *, tol: float = TOL,
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # voxel-contact notes of the common set's "area" RVEs
         t = time.perf_counter()
-        res = homogenize(problem, mat, backend=backend, tol=tol, store_fields=False,
+        res = homogenize(problem, mat, solver=backend, tol=tol, store_fields=False,
                          check_memory=False, strict=False)
         wall = time.perf_counter() - t
     cg = float(sum(res.solve_times))

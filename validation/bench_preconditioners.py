@@ -35,8 +35,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 import itr_fft  # noqa: E402
+from itr_fv import homogenize  # noqa: E402
 from itr_fv.discrete.problem import DiscreteProblem  # noqa: E402
-from itr_fv.solvers.driver import homogenize  # noqa: E402
 from validation.gallery import build, random_rve  # noqa: E402
 
 TOL = 1e-8
@@ -67,7 +67,7 @@ def rve(name: str, n: int):
 
 def _solve(problem, mat, backend, directions=(0,)) -> dict:
     t = time.perf_counter()
-    res = homogenize(problem, mat, backend=backend, tol=TOL, directions=directions,
+    res = homogenize(problem, mat, solver=backend, tol=TOL, directions=directions,
                      store_fields=False, check_memory=False)
     wall = time.perf_counter() - t
     its = list(res.iterations)
@@ -81,7 +81,7 @@ def _solve(problem, mat, backend, directions=(0,)) -> dict:
 def warm_up() -> None:
     ms, mat = build("aln_60", 16, contact="gap")
     for pre in PRECONDITIONERS:
-        homogenize(ms, mat, backend=itr_fft.NumbaFFTBackend(preconditioner=pre), tol=1e-4,
+        homogenize(ms, mat, solver=itr_fft.NumbaFFTBackend(preconditioner=pre), tol=1e-4,
                    store_fields=False)
 
 

@@ -51,6 +51,7 @@ def _rss_mb() -> float:
 
 def one(solver: str, n: int, dtype: str = "float64") -> dict:
     """Solve CASE at n^3 with ``solver``; returns times, iterations, peak RSS (MB)."""
+    from itr_fv import homogenize, resolve_solver
     from validation.gallery import build
     t = time.perf_counter()
     ms, mat = build(CASE, n)
@@ -62,19 +63,16 @@ def one(solver: str, n: int, dtype: str = "float64") -> dict:
         # compile/load the kernels outside the timing (cache=True makes this a load)
         from validation.gallery import build as _b
         ms8, mat8 = _b(CASE, 16)
-        itr_fft.homogenize(ms8, mat8, tol=1e-6, store_fields=False, dtype=np.dtype(dtype).type)
+        fft = resolve_solver("fft", dtype=np.dtype(dtype).type)
+        homogenize(ms8, mat8, solver=fft, tol=1e-6, store_fields=False)
         rss_build = max(rss_build, _rss_mb())
         # float32 vectors cannot reach 1e-8: their residual floor grows like n^2
         tol = TOL if dtype == "float64" else itr_fft.float32_min_tol(ms.shape)
-        res = itr_fft.homogenize(ms, mat, tol=tol, store_fields=False,
-                                 dtype=np.dtype(dtype).type)
+        res = homogenize(ms, mat, solver=fft, tol=tol, store_fields=False)
     elif solver == "scipy_fft":
-        import itr_fft  # noqa: F401 - registers the backend
-        from itr_fv.solvers.driver import homogenize
-        res = homogenize(ms, mat, backend="scipy_fft", tol=TOL, store_fields=False)
+        res = homogenize(ms, mat, solver="scipy_fft", tol=TOL, store_fields=False)
     else:
-        import itr_fv
-        res = itr_fv.homogenize(ms, mat, tol=TOL, store_fields=False)
+        res = homogenize(ms, mat, solver="fv", tol=TOL, store_fields=False)
     return dict(solver=solver, n=n, dtype=dtype, wall=res.wall_time, setup=res.setup_time,
                 solve=res.solve_times, iterations=res.iterations, k=np.diag(res.k_eff).tolist(),
                 rss_mb=_rss_mb(), rss_before_mb=rss_build, build_s=t_build,
@@ -97,8 +95,8 @@ def run_sub(solver: str, n: int, dtype: str = "float64", timeout: float = 1800,
 
 def studies(n_grid: tuple[int, int] = (64, 128)) -> dict:
     """Iterations vs grid, reference conductivity, warm start, profile (in this process)."""
-    import itr_fft
     import itr_fv
+    from itr_fv import homogenize, resolve_solver
     from validation.gallery import build, sphere_array
     out: dict = {}
     # iterations vs grid for fixed spheres (FCC f = 0.5 and the dense RVE)
@@ -109,16 +107,16 @@ def studies(n_grid: tuple[int, int] = (64, 128)) -> dict:
         its = []
         for n in n_grid:
             ms, mat = maker(n)
-            its.append(itr_fft.homogenize(ms, mat, tol=TOL, directions=(0,),
-                                          store_fields=False).iterations[0])
+            its.append(homogenize(ms, mat, solver="fft", tol=TOL, directions=(0,),
+                                  store_fields=False).iterations[0])
         grid.append((label, its))
     out["grid"] = grid
     # reference conductivity of the preconditioner
     ms, mat = build(CASE, 64)
     refs = []
     for ref in ("min", "harmonic", "geometric", "arithmetic", "max"):
-        r = itr_fft.homogenize(ms, mat, tol=TOL, directions=(0,), reference=ref,
-                               store_fields=False)
+        r = homogenize(ms, mat, solver=resolve_solver("fft", reference=ref), tol=TOL,
+                       directions=(0,), store_fields=False)
         refs.append((ref, r.info["g_ref"], r.iterations[0]))
     out["reference"] = refs
     # warm start: one step of Table 4 for both resistances
@@ -128,29 +126,31 @@ def studies(n_grid: tuple[int, int] = (64, 128)) -> dict:
     for r1, r2 in ((1e-7, 5e-7), (5e-7, 1e-6), (1e-6, 5e-6)):
         m1 = mat.with_values(resistance={p: r1 for p in pairs})
         m2 = mat.with_values(resistance={p: r2 for p in pairs})
-        first = itr_fft.homogenize(ms, m1, tol=TOL, geometry=geom)
-        cold = itr_fft.homogenize(ms, m2, tol=TOL, geometry=geom, store_fields=False)
-        w = itr_fft.homogenize(ms, m2, tol=TOL, geometry=geom, x0=first.theta,
-                               store_fields=False)
+        first = homogenize(ms, m1, solver="fft", tol=TOL, geometry=geom)
+        cold = homogenize(ms, m2, solver="fft", tol=TOL, geometry=geom, store_fields=False)
+        w = homogenize(ms, m2, solver="fft", tol=TOL, geometry=geom, x0=first.theta,
+                       store_fields=False)
         warm.append((r1, r2, sum(cold.iterations), sum(w.iterations),
                      float(w.residual_history[0][0])))
     out["warm"] = warm
     from itr_fv.solvers.warm_start import galerkin_start
     target = mat.with_values(resistance={p: 5e-7 for p in pairs})
-    snaps = {r: itr_fft.homogenize(ms, mat.with_values(resistance={p: r for p in pairs}),
-                                   tol=TOL, geometry=geom, directions=(0,)).theta
+    snaps = {r: homogenize(ms, mat.with_values(resistance={p: r for p in pairs}), solver="fft",
+                           tol=TOL, geometry=geom, directions=(0,)).theta
              for r in (1e-8, 5e-8, 1e-7, 1e-6)}
-    gal = [("none (cold)", itr_fft.homogenize(ms, target, tol=TOL, geometry=geom,
-                                              directions=(0,)).iterations[0], 1.0)]
+    gal = [("none (cold)", homogenize(ms, target, solver="fft", tol=TOL, geometry=geom,
+                                      directions=(0,)).iterations[0], 1.0)]
     for keys in ((1e-7,), (1e-7, 1e-6), (1e-8, 5e-8, 1e-7, 1e-6)):
         x0 = galerkin_start(geom, target, [snaps[k] for k in keys], directions=(0,))
-        r = itr_fft.homogenize(ms, target, tol=TOL, geometry=geom, directions=(0,), x0=x0)
+        r = homogenize(ms, target, solver="fft", tol=TOL, geometry=geom, directions=(0,),
+                       x0=x0)
         gal.append((", ".join(f"{k:g}" for k in keys), r.iterations[0],
                     float(r.residual_history[0][0])))
     out["galerkin"] = gal
     # float32 vs float64
-    r64 = itr_fft.homogenize(ms, mat, tol=1e-10, store_fields=False)
-    r32 = itr_fft.homogenize(ms, mat, tol=2e-6, dtype=np.float32, store_fields=False)
+    r64 = homogenize(ms, mat, solver="fft", tol=1e-10, store_fields=False)
+    r32 = homogenize(ms, mat, solver=resolve_solver("fft", dtype=np.float32), tol=2e-6,
+                     store_fields=False)
     out["float32"] = dict(diff=float(np.abs(r32.k_eff - r64.k_eff).max()
                                      / np.abs(r64.k_eff).max()),
                           it32=r32.iterations, t32=r32.wall_time, t64=r64.wall_time)
@@ -158,7 +158,7 @@ def studies(n_grid: tuple[int, int] = (64, 128)) -> dict:
     ms, mat = build(CASE, 128)
     prof = cProfile.Profile()
     prof.enable()
-    itr_fft.homogenize(ms, mat, tol=TOL, directions=(0,), store_fields=False)
+    homogenize(ms, mat, solver="fft", tol=TOL, directions=(0,), store_fields=False)
     prof.disable()
     s = io.StringIO()
     pstats.Stats(prof, stream=s).sort_stats("tottime").print_stats(12)

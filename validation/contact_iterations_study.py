@@ -83,9 +83,9 @@ def solve(prob, mat, *, preconditioner: str = "multigrid", options: dict | None 
           coupled: bool = False) -> dict:
     """Three load cases at tol 1e-8; the multigrid built with ``options``, following the
     particle ids (or the coupled groups where ``coupled``)."""
-    import itr_fft
     import itr_fft.numba_backend as nb
     from itr_fft.multigrid import AggregationMultigrid, coupled_groups
+    from itr_fv import homogenize, resolve_solver
 
     nb.AggregationMultigrid = functools.partial(AggregationMultigrid, **(options or {}))
     nb.coupled_groups = coupled_groups if coupled else (lambda g, ids: ids)
@@ -93,8 +93,9 @@ def solve(prob, mat, *, preconditioner: str = "multigrid", options: dict | None 
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
             t = time.perf_counter()
-            res = itr_fft.homogenize(prob, mat, tol=1e-8, store_fields=False,
-                                     preconditioner=preconditioner)
+            res = homogenize(prob, mat,
+                             solver=resolve_solver("fft", preconditioner=preconditioner),
+                             tol=1e-8, store_fields=False)
             wall = time.perf_counter() - t
     finally:
         nb.AggregationMultigrid = AggregationMultigrid

@@ -93,10 +93,9 @@ def solve(solver: str, lattice: str, f: float, k_ratio: float, alpha: float, n: 
     (segment law with the staircase / normal crossing share, gap contacts: R at every
     particle-matrix crossing, the matrix film between spheres along each segment).
     """
-    if solver.startswith("fft"):
-        import itr_fft as mod
-    else:
-        import itr_fv as mod
+    from itr_fv import homogenize
+
+    method = "fft" if solver.startswith("fft") else "fv"
     # "fft_2x": 2 x 2 x 2 supercell at the same voxel size (n = voxels per conventional cell)
     ms, mat = unit_cell(lattice, f, k_ratio, alpha, n, rep=2 if solver == "fft_2x" else 1)
     t0 = time.perf_counter()
@@ -109,10 +108,11 @@ def solve(solver: str, lattice: str, f: float, k_ratio: float, alpha: float, n: 
                         "matrix", contact="gap")
         problem = DiscreteProblem(ms, contact="gap",
                                   interface=SegmentLaw(share=SEGMENT_SOLVERS[solver]))
-        res = mod.homogenize(problem, mat, tol=TOL, directions=(0,), store_fields=False)
+        res = homogenize(problem, mat, solver=method, tol=TOL, directions=(0,),
+                         store_fields=False)
     else:
-        res = mod.homogenize(ms, mat, tol=TOL, directions=(0,), staircase=staircase,
-                             store_fields=False)
+        res = homogenize(ms, mat, solver=method, tol=TOL, directions=(0,), staircase=staircase,
+                         store_fields=False)
     wall = time.perf_counter() - t0
     ref = analytic.sphere_array(lattice, f, k_ratio, alpha)
     k = float(res.k_eff[0, 0]) / K_M

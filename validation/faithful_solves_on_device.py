@@ -57,8 +57,8 @@ def pick_backend(out: Path) -> dict:
     import numpy as np
 
     from itr_fft.array_api_backend import ArrayAPIBackend
+    from itr_fv import homogenize
     from itr_fv.discrete.problem import DiscreteProblem
-    from itr_fv.solvers.driver import homogenize
     from itr_surrogate.campaign import Campaign
     from itr_surrogate.runner import campaign_rve
 
@@ -74,9 +74,9 @@ def pick_backend(out: Path) -> dict:
     for pre, kern in variants:
         try:
             be = ArrayAPIBackend(device="cuda", preconditioner=pre, kernels=kern)
-            homogenize(problem, mat, backend=be, tol=1e-6, directions=(0,))  # warm
+            homogenize(problem, mat, solver=be, tol=1e-6, directions=(0,))  # warm
             t = time.perf_counter()
-            res = homogenize(problem, mat, backend=be, tol=1e-6)
+            res = homogenize(problem, mat, solver=be, tol=1e-6)
             wall = time.perf_counter() - t
             k = float(np.trace(res.k_eff) / 3)
             rows[f"{pre}/{kern}"] = {"k_iso": k, "wall_s": wall,
@@ -256,8 +256,8 @@ def quick_kernels(out: Path) -> None:
         log("numpy.row_stack aliased to numpy.vstack for this run (numba-cuda 0.30 calls it)",
             out)
     from itr_fft.array_api_backend import ArrayAPIBackend
+    from itr_fv import homogenize
     from itr_fv.discrete.problem import DiscreteProblem
-    from itr_fv.solvers.driver import homogenize
     from itr_surrogate.campaign import Campaign
     from itr_surrogate.runner import campaign_rve
 
@@ -272,7 +272,7 @@ def quick_kernels(out: Path) -> None:
         try:
             be = ArrayAPIBackend(device="cuda", preconditioner="fft", kernels=kern)
             t = time.perf_counter()
-            res = homogenize(problem, mat, backend=be, tol=1e-8)
+            res = homogenize(problem, mat, solver=be, tol=1e-8)
             k[kern] = float(np.trace(res.k_eff) / 3)
             log(f"fft/{kern}: k_iso {k[kern]:.8f} in {time.perf_counter() - t:.1f} s (first, "
                 f"with compiling)", out)

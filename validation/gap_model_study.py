@@ -67,9 +67,7 @@ def law_object(name: str):
 
 
 def solve(per: int, lat: str, film: float, kp: float, rb: float, law: str) -> dict:
-    import itr_fft
-    import itr_fv
-    from itr_fv import Materials, analytic
+    from itr_fv import Materials, analytic, homogenize
     from itr_fv.discrete.problem import DiscreteProblem
     from validation.gallery import touching_array
 
@@ -79,8 +77,8 @@ def solve(per: int, lat: str, film: float, kp: float, rb: float, law: str) -> di
     ref = analytic.sphere_array(lat, f, kp / K_M, rb * K_M / A) * K_M
     t = time.perf_counter()
     problem = DiscreteProblem(ms, contact="gap", interface=law_object(law))
-    k_fft = np.diag(itr_fft.homogenize(problem, mat, tol=1e-8, store_fields=False).k_eff)
-    k_fv = np.diag(itr_fv.homogenize(problem, mat, tol=1e-8, store_fields=False).k_eff)
+    k_fft = np.diag(homogenize(problem, mat, solver="fft", tol=1e-8, store_fields=False).k_eff)
+    k_fv = np.diag(homogenize(problem, mat, solver="fv", tol=1e-8, store_fields=False).k_eff)
     k = float(k_fft.mean())
     return {"per": per, "lattice": lat, "film_nm": f"{film * 1e9:g}", "k_p": f"{kp:g}",
             "R_b": f"{rb:g}", "law": law, "n": ms.shape[0], "f": f"{f:.6f}",

@@ -85,13 +85,14 @@ def materials(r_ff: float) -> Materials:
 
 
 def solve(seed: int, config: str, voxel_um: float) -> dict:
-    import itr_fft
+    from itr_fv import homogenize
+
     c, r, m, _ = particles(seed)
     n = round(BOX_UM / voxel_um)
     ms = Microstructure.from_spheres(c, r, m, box_m=BOX_UM * 1e-6, shape=(n, n, n),
                                      matrix="silicone")
     t0 = time.perf_counter()
-    res = itr_fft.homogenize(ms, materials(CONFIGS[config]), tol=TOL, store_fields=False)
+    res = homogenize(ms, materials(CONFIGS[config]), solver="fft", tol=TOL, store_fields=False)
     wall = time.perf_counter() - t0
     k = res.k_eff
     return {"seed": seed, "config": config, "R_ff": CONFIGS[config], "voxel_um": voxel_um,

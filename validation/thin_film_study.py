@@ -30,8 +30,7 @@ def laminate_normal(f: float) -> float:
 
 
 def main() -> None:
-    import itr_fft
-    from itr_fv import Materials, Microstructure
+    from itr_fv import Materials, Microstructure, homogenize
 
     h = 1e-6 / N
     x = (np.arange(N) + 0.5) * h
@@ -48,8 +47,8 @@ def main() -> None:
             slab = np.abs(np.mod(u, period) - period / 2) < tr * h / 2
             mid = np.where(slab, 0, 1).astype(np.int32)
             ms = Microstructure.from_labels(mid, mid.copy(), voxel_m=h, names=("m", "P"))
-            res = itr_fft.homogenize(ms, mat, tol=1e-10, store_fields=False,
-                                     check_memory=False)
+            res = homogenize(ms, mat, solver="fft", tol=1e-10, store_fields=False,
+                             check_memory=False)
             kn = float(n @ res.k_eff @ n)
             f_true = tr * h / period
             f_vox = float(slab.mean())
