@@ -1,11 +1,15 @@
 """itr_fft: FFT-preconditioned CG backends of the discrete model of :mod:`itr_fv.discrete.model`.
 
-Public API::
+A solve goes through the package's one door, ``itr_fv.homogenize``, with a solver::
 
-    import itr_fft
-    res = itr_fft.homogenize(ms, mat, tol=1e-8)       # same signature/result as itr_fv
+    from itr_fv import homogenize, resolve_solver
+    res = homogenize(ms, mat, solver="fft", tol=1e-8)
+    res = homogenize(ms, mat, solver=resolve_solver("fft", preconditioner="multigrid"))
 
-Importing the package registers three backends of :func:`itr_fv.solvers.driver.homogenize`:
+(``itr_fft.homogenize(ms, mat, tol, **options)`` of earlier releases is gone: its options
+are those of ``resolve_solver("fft", **options)``.)
+
+Importing the package registers three backends of :func:`itr_fv.homogenize`:
 ``"itr_fft"`` (:mod:`itr_fft.numba_backend`, fused numba kernels, the fast one on a CPU;
 its preconditioner is the FFT Laplacian inverse or, with ``preconditioner="multigrid"``,
 particle deflation around an aggregation multigrid, :mod:`itr_fft.multigrid`,
@@ -33,8 +37,16 @@ from .numba_backend import (
     reference_conductance,
 )
 from .scipy_backend import ScipyFFTBackend
-from .solver import homogenize
 
-__all__ = ["homogenize", "reference_conductance", "FLOAT32_MIN_TOL", "float32_min_tol",
+__all__ = ["reference_conductance", "FLOAT32_MIN_TOL", "float32_min_tol",
            "NumbaFFTBackend", "ScipyFFTBackend", "ArrayAPIBackend", "resolve_device",
            "PRECONDITIONERS"]
+
+
+def __getattr__(name: str):
+    """``itr_fft.homogenize`` of earlier releases is gone: one line saying where it went."""
+    if name == "homogenize":
+        raise AttributeError("itr_fft.homogenize was removed: every solve goes through "
+                             "itr_fv.homogenize(ms, mat, solver=itr_fv.resolve_solver('fft', "
+                             "**options), tol=...)")
+    raise AttributeError(f"module 'itr_fft' has no attribute {name!r}")

@@ -22,11 +22,12 @@ from . import _moved
 from .checks import PhysicalScaleWarning
 from .materials.properties import Materials
 from .rve.microstructure import Microstructure, ParticleTable
-from .solvers.reference import homogenize
+from .solvers.choice import Solver, resolve_solver
+from .solvers.driver import homogenize
 from .solvers.resources import InsufficientMemoryError
 from .solvers.result import ConvergenceError, HomogenizationResult
 
-__all__ = ["Materials", "Microstructure", "ParticleTable", "homogenize",
+__all__ = ["Materials", "Microstructure", "ParticleTable", "homogenize", "Solver", "resolve_solver",
            "HomogenizationResult", "ConvergenceError", "InsufficientMemoryError",
            "PhysicalScaleWarning"]
 __version__ = "0.1.0"

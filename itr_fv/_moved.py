@@ -28,7 +28,7 @@ MOVED = {
     "problem": "discrete.problem", "model": "discrete.model",
     "vtk_output": "output.vtk", "offscreen": "output.offscreen",
     "particle_render": "output.particle_render",
-    "solve": "solvers.driver", "solver": "solvers.reference", "backends": "solvers.backends",
+    "solve": "solvers.driver", "solver": "solvers.driver", "backends": "solvers.backends",
     "krylov": "solvers.krylov", "amg_backend": "solvers.amg", "resources": "solvers.resources",
     "warm_start": "solvers.warm_start", "result": "solvers.result",
 }

@@ -81,7 +81,7 @@ from itr_fv.materials.material_system import MaterialSystem
 from itr_fv.materials.parameters import parameter_name
 from itr_fv.rve import FillerSpec, packing_limit
 from itr_fv.rve.spec import RVESpec
-from itr_fv.solvers.choice import check_solver, default_solver
+from itr_fv.solvers.choice import Solver, as_solver, default_solver
 
 from . import design as designs
 
@@ -141,7 +141,7 @@ class Campaign:
     name: str = "campaign"
     replicas: int = 1
     contact: str = "gap"
-    solver: str = field(default_factory=default_solver)
+    solver: Solver = field(default_factory=default_solver)
     tol: float = 1e-6
     block_size: int = 8
     threads_per_worker: int = 1
@@ -156,6 +156,14 @@ class Campaign:
                                       doc="Largest particle diameter / box edge.")
     min_gap_um = property(lambda self: self.rve.min_gap_um,
                           doc="Thinnest matrix film between two particles, um.")
+
+    def __post_init__(self) -> None:
+        """The solver as a :class:`~itr_fv.solvers.choice.Solver` (a name of a file is
+        resolved here, once; CampaignError naming ``solver``)."""
+        try:
+            object.__setattr__(self, "solver", as_solver(self.solver))
+        except ValueError as err:
+            raise CampaignError(str(err)) from None
 
     # ------------------------------------------------------------------ reading
     @classmethod
@@ -208,6 +216,7 @@ class Campaign:
     def to_dict(self) -> dict[str, Any]:
         """Plain JSON-able form; ``from_dict(to_dict())`` gives the same campaign."""
         d = asdict(self)
+        d["solver"] = self.solver.key
         del d["rve"]
         d.update({k: getattr(self.rve, k) for k in _RVE_KEYS})
         for optional in ("cut_voxel_um", "film_um"):
@@ -235,10 +244,6 @@ class Campaign:
             _whole(getattr(self, key), key, 1)
         if self.contact not in ("gap", "area"):
             raise CampaignError(f"contact: expected 'gap' or 'area', got {self.contact!r}")
-        try:
-            check_solver(self.solver)
-        except ValueError as err:
-            raise CampaignError(str(err)) from None
         if not (isinstance(self.tol, (int, float)) and 1e-12 <= self.tol < 1):
             raise CampaignError(f"tol: expected a relative residual in [1e-12, 1), got "
                                 f"{self.tol!r}")

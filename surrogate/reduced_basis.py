@@ -47,7 +47,7 @@ from itr_fv.discrete.problem import DiscreteProblem
 from itr_fv.io import atomic_path
 from itr_fv.materials import Materials
 from itr_fv.rve.microstructure import Microstructure
-from itr_fv.solvers.choice import check_solver, solver_backend
+from itr_fv.solvers.choice import Solver, as_solver
 
 from .face_decomposition import (
     ConductanceInterpolation,
@@ -135,9 +135,10 @@ class ReducedBasis:
         Parameter sets of the greedy's training set (plus the 2^P corners of the box).
     seed : int
         Seed of the training and check sets.
-    solver : str
-        Full solver of the snapshots: ``"fft"``, ``"fv"``, ``"auto"`` or a backend name
-        (:mod:`itr_fv.solvers.choice`).
+    solver : Solver or str, optional
+        Full solver of the snapshots: a :class:`~itr_fv.solvers.choice.Solver`, or a name
+        (``"fft"``, ``"fv"``, ``"auto"``, a backend name) resolved once here (None: the
+        default).
     solver_tol : float
         Relative residual of the full solves.
     interpolation_tol : float, optional
@@ -179,7 +180,7 @@ class ReducedBasis:
     def __init__(self, ms: Microstructure | DiscreteProblem, materials: Materials,
                  bounds: Mapping[str, tuple[float, float]], *, tol: float = 1e-3,
                  max_solves: int = 40, n_train: int = 256, seed: int = 0,
-                 solver: str | None = None,
+                 solver: Solver | str | None = None,
                  solver_tol: float = 1e-9, interpolation_tol: float | None = None,
                  max_interpolation_terms: int = 120, progress: bool = False) -> None:
         self.ms = ms
@@ -189,7 +190,7 @@ class ReducedBasis:
         self.max_solves = max_solves
         self.n_train = n_train
         self.seed = seed
-        self.solver = check_solver(solver)
+        self.solver = as_solver(solver)
         self.solver_tol = solver_tol
         self.interpolation_tol = interpolation_tol
         self.max_interpolation_terms = max_interpolation_terms
@@ -218,7 +219,6 @@ class ReducedBasis:
                                  ("seed", self.seed, 0)):
             if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
                 raise ValueError(f"{name}: expected a whole number >= {low}, got {value!r}")
-        check_solver(self.solver)
         if isinstance(self.ms, DiscreteProblem):
             problem = self.ms
         elif isinstance(self.ms, Microstructure):
@@ -310,11 +310,11 @@ class ReducedBasis:
         return self.interpolation_tol
 
     def _full_solver(self):
-        from itr_fv.solvers.driver import homogenize
+        from itr_fv import homogenize
 
         def solve(problem, mat):
-            backend = solver_backend(self.solver, voxels=math.prod(problem.shape))
-            return homogenize(problem, mat, backend=backend, tol=self.solver_tol)
+            backend = self.solver.backend(voxels=math.prod(problem.shape))
+            return homogenize(problem, mat, solver=backend, tol=self.solver_tol)
         return solve
 
     def _setup(self, box: ParameterBox, dec: ResistanceDecomposition,
@@ -474,7 +474,7 @@ class ReducedBasis:
                 "materials": {"parameters": self.box_.base, "matrix": mat.matrix,
                               "contact": mat.contact},
                 "tol": self.tol, "max_solves": self.max_solves, "n_train": self.n_train,
-                "seed": self.seed, "solver": self.solver, "solver_tol": self.solver_tol,
+                "seed": self.seed, "solver": self.solver.key, "solver_tol": self.solver_tol,
                 "interpolation_tol": self.interpolation_tol,
                 "max_interpolation_terms": self.max_interpolation_terms,
                 "scale": self.scale_, "interpolation_error": self.interpolation_error_,

@@ -5,7 +5,9 @@ worker, :func:`run_task` packs and voxelizes the RVE (seeded: the same table eve
 builds its :class:`~itr_fv.discrete.problem.DiscreteProblem` once, and solves the block's parameter
 sets in order, each warm-started from the nearest set already solved in the task. It writes
 nothing: it returns the rows and the RVE's particle table to the client. The driver
-(:func:`run_campaign`) submits the tasks whose part file is missing, shows a progress bar,
+(:func:`run_campaign`) submits the tasks whose part file is missing through the solve
+engine's cluster (:meth:`~itr_surrogate.engine.SolveEngine.run_tasks`, the package's one
+Dask path), shows a progress bar,
 and, as each task finishes, writes its RVE table and its rows as one Parquet part file,
 atomically (:class:`~itr_surrogate.store.CampaignStore`, whose folder is absolute in the
 client's working directory); a failure is recorded without stopping the others. No path
@@ -32,7 +34,9 @@ from itr_fv.materials.parameters import parse_parameter
 from itr_fv.rve import PackedRVE, build_rve
 
 from .campaign import Campaign, CampaignError, Task, nearest_solved
-from .store import CampaignStore, rve_id, tensor_columns
+from .engine import SolveEngine
+from .rows import rve_id, tensor_columns
+from .store import CampaignStore
 
 __all__ = ["run_campaign", "run_task", "run_tasks_here", "write_task_result", "campaign_rve",
            "RunSummary", "worker_memory"]
@@ -51,9 +55,8 @@ class RunSummary:
 
 
 def _backend(camp: Campaign):
-    """The campaign's solver backend (chosen in :mod:`itr_fv.solvers.choice`)."""
-    from itr_fv.solvers.choice import solver_backend
-    return solver_backend(camp.solver, threads=camp.threads_per_worker)
+    """The campaign's solver backend (its :class:`~itr_fv.solvers.choice.Solver`'s)."""
+    return camp.solver.backend(camp.threads_per_worker)
 
 
 def campaign_rve(camp: Campaign, formulation: str, replica: int) -> PackedRVE:
@@ -69,23 +72,22 @@ def campaign_rve(camp: Campaign, formulation: str, replica: int) -> PackedRVE:
                      matrix=camp.matrix, warn_box_cut=False)
 
 
-def run_task(campaign: dict, task: dict, packed: PackedRVE | None = None) -> dict:
+def run_task(camp: Campaign, task: Task, packed: PackedRVE | None = None) -> dict:
     """Solve one task; returns ``{"task_id", "solves", "wall_s", "rows", "rve"}``: the
     part's rows and the RVE's particle table (``"rve"``: ``rid``, ``centers_m``,
     ``radii_m``, ``materials``, ``meta``), for the client to write.
 
-    Runs on a dask worker (plain arguments: the campaign's dict form and the task's fields;
-    it writes no file). ``packed``: the task's RVE where it was packed elsewhere
+    Runs on a dask worker, with the campaign as the client holds it (its formulations,
+    size distributions and base values already those of its material system: a worker
+    reads no system of its own); it writes no file. ``packed``: the task's RVE where it was
+    packed elsewhere
     (:func:`campaign_rve` of the same campaign, formulation and replica, e.g. in a pool of
     processes ahead of a GPU); default: packed here.
     """
-    from itr_fv import __version__
+    from itr_fv import __version__, homogenize
     from itr_fv.discrete.problem import DiscreteProblem
-    from itr_fv.solvers.driver import homogenize
 
     t0 = time.perf_counter()
-    camp = Campaign.from_dict(campaign)
-    task = Task(**{**task, "set_indices": tuple(task["set_indices"])})
     ms, seed = packed if packed is not None else campaign_rve(camp, task.formulation,
                                                               task.replica)
     table = ms.particles
@@ -107,7 +109,7 @@ def run_task(campaign: dict, task: dict, packed: PackedRVE | None = None) -> dic
         mat = camp.materials(pset)
         near = nearest_solved(pset, solved)
         t = time.perf_counter()
-        res = homogenize(problem, mat, backend=backend, tol=camp.tol,
+        res = homogenize(problem, mat, solver=backend, tol=camp.tol,
                          x0=None if near is None else thetas[near])
         wall = time.perf_counter() - t
         solved.append(pset)
@@ -148,9 +150,9 @@ def _row(camp: Campaign, task: Task, index: int, rid: str, mat, res, wall: float
 def local_workers(workers: int | None) -> int | None:
     """The local Dask workers of a run given ``workers`` (the ``--workers`` option): None
     for 0 (every task in this process), else ``workers`` or, where it is None, the default
-    of :func:`itr_surrogate.engine.open_client` (the cores, at most
-    :data:`~itr_surrogate.engine.MAX_DEFAULT_WORKERS`)."""
-    from .engine import default_workers
+    of :func:`itr_surrogate.cluster.open_client` (the cores, at most
+    :data:`~itr_surrogate.cluster.MAX_DEFAULT_WORKERS`)."""
+    from .cluster import default_workers
 
     if workers == 0:
         return None
@@ -159,32 +161,18 @@ def local_workers(workers: int | None) -> int | None:
 
 def worker_memory(camp: Campaign) -> int:
     """Memory limit of a worker, bytes: the solver's peak estimate with the fields kept plus
-    the warm-start fields of a block, sized by :func:`surrogate.engine.worker_memory_limit`
+    the warm-start fields of a block, sized by :func:`surrogate.cluster.worker_memory_limit`
     (interpreter and allocator slack added, peak kept at dask's pause mark)."""
-    from itr_fv.solvers.choice import needs_gpu, solver_choice
     from itr_fv.solvers.resources import estimate_peak_memory
 
-    from .engine import worker_memory_limit
+    from .cluster import worker_memory_limit
 
     # a GPU solver's backend is sized by name: the client that sizes the workers may have no
     # GPU (its workers do), and a GPU worker's host memory is at most the CPU run's
-    backend = solver_choice(camp.solver).backend if needs_gpu(camp.solver) else _backend(camp)
+    backend = camp.solver.entry.backend if camp.solver.needs_gpu else _backend(camp)
     peak = estimate_peak_memory(camp.shape, backend, store_fields=True)
     fields = 3 * 8 * int(np.prod(camp.shape)) * camp.block_size
     return worker_memory_limit(peak + fields)
-
-
-def _client(workers: int | None, scheduler: str | None, camp: Campaign, echo: Callable):
-    """A dask client on the scheduler, or on a new LocalCluster sized by memory (with GPU
-    workers for a GPU solver): :func:`surrogate.engine.open_client` decides, as for every
-    solve of the package."""
-    from .engine import open_client
-
-    try:
-        return open_client(workers, scheduler, memory_per_worker=worker_memory(camp),
-                           echo=echo, solver=camp.solver)
-    except ValueError as err:
-        raise CampaignError(str(err)) from None
 
 
 def run_campaign(campaign: Campaign, folder: str | Path, *, workers: int | None = None,
@@ -228,19 +216,19 @@ def run_campaign(campaign: Campaign, folder: str | Path, *, workers: int | None 
         return RunSummary(0, len(tasks), 0, 0, time.perf_counter() - t0, 0)
     if workers == 0 and scheduler is None:
         return _run_here(campaign, store, todo, len(tasks), progress, echo, t0)
-    client, cluster = _client(workers, scheduler, campaign, echo)
     try:
-        n_workers = _ready_workers(client, scheduler, campaign)
-        store.open_for(campaign)
-        store.remove_partial_files()
-        echo(f"campaign {campaign.name}: {len(todo)} of {len(tasks)} tasks to run "
-             f"({sum(len(t.set_indices) for t in todo)} solves on {campaign.shape[0]}^3 "
-             f"voxels, {counted(n_workers, 'worker')})")
-        solves, failed, written = _execute(client, campaign, todo, store, progress)
-    finally:
-        client.close()
-        if cluster is not None:
-            cluster.close()
+        engine = SolveEngine(workers=None if scheduler else local_workers(workers),
+                             scheduler=scheduler, echo=echo)
+        with engine:
+            n_workers = engine.ready(campaign.solver, worker_memory(campaign))
+            store.open_for(campaign)
+            store.remove_partial_files()
+            echo(f"campaign {campaign.name}: {len(todo)} of {len(tasks)} tasks to run "
+                 f"({sum(len(t.set_indices) for t in todo)} solves on {campaign.shape[0]}^3 "
+                 f"voxels, {counted(n_workers, 'worker')})")
+            solves, failed, written = _execute(engine, campaign, todo, store, progress)
+    except ValueError as err:   # the cluster's one-line refusals, before any submit
+        raise CampaignError(str(err)) from None
     missing = sorted(t for t in written if not store.part_path(t).is_file())
     if missing:
         raise CampaignError(f"{counted(len(missing), 'task')} reported done without a part file in "
@@ -259,12 +247,11 @@ def run_tasks_here(campaign: Campaign, store: CampaignStore, todo: list[Task], *
     on a cluster. Returns (solves, failures, the tasks written)."""
     from tqdm import tqdm
 
-    spec = campaign.to_dict()
     failed = solves = 0
     written: list[str] = []
     for task in tqdm(todo, unit="task", disable=not progress, desc=campaign.name):
         try:
-            result = run_task(spec, _task_dict(task))
+            result = run_task(campaign, task)
         except Exception as exc:  # noqa: BLE001 - a task's failure is recorded, not fatal
             failed += 1
             store.record_failure(task.task_id, f"{type(exc).__name__}: {exc}")
@@ -289,40 +276,21 @@ def _run_here(campaign: Campaign, store: CampaignStore, todo: list[Task], n_task
     return summary
 
 
-def _ready_workers(client, scheduler: str | None, campaign: Campaign) -> int:
-    """Number of workers once the cluster can run the campaign's solver
-    (:func:`surrogate.engine.ready_workers`: a first worker within 60 s, one whose memory
-    limit holds a task, a GPU worker for a GPU solver); a CampaignError before anything is
-    submitted otherwise."""
-    from .engine import ready_workers
-
-    try:
-        return ready_workers(client, scheduler, campaign.solver,
-                             memory_per_worker=worker_memory(campaign))
-    except ValueError as err:
-        raise CampaignError(str(err)) from None
-
-
-def _execute(client, campaign: Campaign, todo: list[Task], store: CampaignStore,
+def _execute(engine: SolveEngine, campaign: Campaign, todo: list[Task], store: CampaignStore,
              progress: bool) -> tuple[int, int, list[str]]:
-    """Submit the tasks, write each finished task's part here on the client, record each
-    failure, show progress; returns (solves, failures, the tasks written)."""
-    from dask.distributed import as_completed
+    """Submit the tasks through the engine's cluster, write each finished task's part here
+    on the client, record each failure, show progress; returns (solves, failures, the
+    tasks written)."""
     from tqdm import tqdm
 
-    from itr_fv.solvers.choice import worker_resources
-
-    spec = campaign.to_dict()
     prefix = f"itr-{campaign.fingerprint()[:8]}-"
-    resources = worker_resources(campaign.solver)
-    futures = [client.submit(run_task, spec, _task_dict(t), key=prefix + t.task_id,
-                             pure=False, resources=resources)
-               for t in todo]
     failed = solves = 0
     written: list[str] = []
+    tasks = {prefix + t.task_id: (campaign, t) for t in todo}
     with tqdm(total=len(todo), unit="task", disable=not progress, desc=campaign.name) as bar:
-        for fut in as_completed(futures):
-            task_id = str(fut.key)[len(prefix):]
+        for key, fut in engine.run_tasks(run_task, tasks, solver=campaign.solver,
+                                         memory_per_worker=worker_memory(campaign)):
+            task_id = key[len(prefix):]
             try:
                 result = fut.result()
             except Exception as exc:  # noqa: BLE001 - a task's failure is recorded, not fatal
@@ -336,8 +304,3 @@ def _execute(client, campaign: Campaign, todo: list[Task], store: CampaignStore,
             bar.update(1)
             bar.set_postfix(solves=solves, failed=failed)
     return solves, failed, written
-
-
-def _task_dict(task: Task) -> dict:
-    return {"task_id": task.task_id, "formulation": task.formulation, "replica": task.replica,
-            "seed": task.seed, "block": task.block, "set_indices": list(task.set_indices)}

@@ -1,4 +1,9 @@
-"""The results of a campaign on disk: a Parquet dataset that never loses a finished solve.
+"""The Parquet stores: finished solves on disk, never lost, each file written atomically.
+
+Two folders, one way of writing: :class:`SolveStore` keeps the full solves of the
+identification's engine (a row per solve, keyed by its request), :class:`CampaignStore` the
+tasks of a campaign (a row per solve, a part file per task). Their rows share the columns of
+:mod:`surrogate.rows` (the tensor, the RVE's identity).
 
 Layout of a campaign folder::
 
@@ -27,43 +32,14 @@ import pyarrow.parquet as pq
 from itr_fv.io import atomic_path, write_text
 
 from .campaign import Campaign, CampaignError
+from .requests import SolveRequest, SolveResult, solve_row
+from .rows import rve_id, tensor_columns, tensor_of
 
-__all__ = ["CampaignStore", "CampaignStatus", "rve_id", "RESULT_KEY", "tensor_columns",
-           "tensor_of"]
+__all__ = ["CampaignStore", "CampaignStatus", "SolveStore", "RESULT_KEY", "rve_id",
+           "tensor_columns", "tensor_of"]
 
 #: Columns that identify a row (one solve) of a campaign.
 RESULT_KEY = ("formulation", "replica", "set_index")
-
-
-def tensor_columns(k: np.ndarray) -> dict[str, float]:
-    """The 3x3 tensor (W/(m K)) as the row columns ``k_xx`` ... ``k_zz`` and ``k_iso``."""
-    row = {f"k_{ax}{bx}": float(k[a, b]) for a, ax in enumerate("xyz")
-           for b, bx in enumerate("xyz")}
-    row["k_iso"] = float(np.trace(k) / 3.0)
-    return row
-
-
-def tensor_of(row: dict) -> np.ndarray:
-    """The 3x3 tensor of a row written with :func:`tensor_columns`."""
-    return np.array([[row[f"k_{a}{b}"] for b in "xyz"] for a in "xyz"])
-
-
-def rve_id(centers_m: np.ndarray, radii_m: np.ndarray, materials: list[str],
-           shape: tuple[int, int, int], voxel_m: float, contact=None) -> str:
-    """Hash of a particle table, its voxel grid and its contact film (a
-    :class:`~itr_fv.rve.contact_film.ContactFilm`, None: the default), 16 hex digits: the
-    RVE's identity."""
-    import hashlib
-
-    h = hashlib.sha256()
-    h.update(np.ascontiguousarray(centers_m, dtype="<f8").tobytes())
-    h.update(np.ascontiguousarray(radii_m, dtype="<f8").tobytes())
-    h.update("\0".join(materials).encode())
-    h.update(np.asarray(shape, dtype="<i8").tobytes())
-    h.update(np.float64(voxel_m).astype("<f8").tobytes())
-    if contact is not None:
-        h.update(np.asarray(contact.args, dtype="<f8").tobytes())
-    return h.hexdigest()[:16]
 
 
 @dataclass(frozen=True)
@@ -230,3 +206,85 @@ class CampaignStore:
         return CampaignStatus(camp.name, len(done & {t.task_id for t in tasks}), len(tasks),
                               solves_done, camp.n_solves(),
                               {k: v for k, v in self.failures().items() if k not in done})
+
+
+class SolveStore:
+    """Finished solves in a folder: ``solves/<key>.parquet`` (one row each) and
+    ``fields/<key>.npz`` (theta, where asked for), each written atomically, by the client
+    (``folder`` is made absolute at once)."""
+
+    def __init__(self, folder: str | Path) -> None:
+        self.folder = Path(folder).absolute()
+
+    def _row_path(self, key: str) -> Path:
+        return self.folder / "solves" / f"{key}.parquet"
+
+    def _field_path(self, key: str) -> Path:
+        return self.folder / "fields" / f"{key}.npz"
+
+    def get(self, request: SolveRequest) -> SolveResult | None:
+        """The stored result of ``request`` (None if not finished, or fields missing)."""
+        key = request.key
+        path = self._row_path(key)
+        if not path.is_file():
+            return None
+        theta = None
+        if request.fields:
+            fpath = self._field_path(key)
+            if not fpath.is_file():
+                return None
+            with np.load(fpath, allow_pickle=False) as data:
+                theta = data["theta"]
+        row = pq.read_table(path).to_pylist()[0]
+        k = tensor_of(row)
+        ke = np.array(json.loads(row["k_energy_json"]))
+        return SolveResult(k, ke, json.loads(row["iterations_json"]), row["residual"],
+                           row["wall_s"], theta, True, False)
+
+    def put(self, request: SolveRequest, result: SolveResult) -> None:
+        """Write one finished solve (fields first, so a row always has its fields)."""
+        key = request.key
+        if request.fields and result.theta is not None:
+            self._field_path(key).parent.mkdir(parents=True, exist_ok=True)
+            with atomic_path(self._field_path(key)) as tmp, open(tmp, "wb") as fh:
+                np.savez(fh, theta=result.theta)
+        row = solve_row(request, result)
+        path = self._row_path(key)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with atomic_path(path) as tmp:
+            pq.write_table(pa.Table.from_pylist([row]), tmp)
+
+    def _rows(self) -> list[Path]:
+        folder = self.folder / "solves"
+        if not folder.is_dir():
+            return []
+        # partial files of a killed write start with a dot (itr_fv.io.atomic_path)
+        return sorted(p for p in folder.glob("*.parquet") if not p.name.startswith("."))
+
+    def count(self) -> int:
+        """Finished solves in the store."""
+        return len(self._rows())
+
+    def _fields(self) -> list[Path]:
+        folder = self.folder / "fields"
+        return sorted(folder.glob("*.npz")) if folder.is_dir() else []
+
+    def field_count(self) -> tuple[int, int]:
+        """(number, bytes) of the stored fields."""
+        files = self._fields()
+        return len(files), sum(f.stat().st_size for f in files)
+
+    def drop_fields(self) -> tuple[int, int]:
+        """Remove every stored field (the rows stay: a request that keeps fields is then
+        solved again, one that does not is still answered); returns (number, bytes)."""
+        n, size = self.field_count()
+        for f in self._fields():
+            f.unlink(missing_ok=True)
+        return n, size
+
+    def table(self) -> pa.Table:
+        """Every stored solve as one table (columns of all rows)."""
+        files = self._rows()
+        if not files:
+            return pa.table({})
+        return pa.concat_tables([pq.read_table(f) for f in files], promote_options="default")

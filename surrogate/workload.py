@@ -7,9 +7,9 @@ the full solves and whether they keep fields. From that alone, before anything i
 
 - **memory**: one solve's peak on the largest grid (the solver's measured bytes per voxel,
   :func:`itr_fv.solvers.resources.estimate_peak_memory`, plus the discrete problem the
-  process keeps, :data:`~itr_surrogate.engine.PROBLEM_BYTES_PER_VOXEL`), against what this
+  process keeps, :data:`~itr_surrogate.worker.PROBLEM_BYTES_PER_VOXEL`), against what this
   machine has available now (a Dask worker's limit: that plus the worker's own base,
-  :func:`~itr_surrogate.engine.worker_memory_limit`); :meth:`Workload.check` refuses in one
+  :func:`~itr_surrogate.cluster.worker_memory_limit`); :meth:`Workload.check` refuses in one
   line what cannot fit and says what would (the finest voxel, the largest box);
 - **time**: packing (:data:`PACK_SECONDS_PER_PARTICLE`) plus solves (the solver's measured
   seconds per voxel and load case, :attr:`itr_fv.solvers.choice.SolverChoice.seconds_per_voxel`,
@@ -28,15 +28,11 @@ from itr_fv.io import counted
 from itr_fv.rve import FillerSpec
 from itr_fv.rve.generate import size_cut
 from itr_fv.rve.spec import RVESpec
-from itr_fv.solvers.choice import (
-    grid_solver,
-    load_case_seconds,
-    other_device_solver,
-    solver_choice,
-)
+from itr_fv.solvers.choice import Solver, load_case_seconds
 from itr_fv.solvers.resources import HEADROOM, available_memory, estimate_peak_memory
 
-from .engine import PROBLEM_BYTES_PER_VOXEL, PROBLEM_CACHE_BYTES, worker_memory_limit
+from .cluster import worker_memory_limit
+from .worker import PROBLEM_BYTES_PER_VOXEL, PROBLEM_CACHE_BYTES
 
 __all__ = ["Grid", "Workload", "WorkloadRefused", "expected_particles", "campaign_workload",
            "PACK_SECONDS_PER_PARTICLE", "SOLVE_OVERHEAD_S", "PROCESS_BASE_BYTES"]
@@ -116,9 +112,9 @@ class Grid:
     def voxels(self) -> int:
         return self.n ** 3
 
-    def solve_bytes(self, solver: str) -> int:
+    def solve_bytes(self, solver: Solver) -> int:
         """Peak bytes of one solve on this grid in a process that holds its problem."""
-        backend = solver_choice(solver).backend
+        backend = solver.entry.backend
         est = estimate_peak_memory((self.n,) * 3, backend, store_fields=self.fields)
         return int(est + PROBLEM_BYTES_PER_VOXEL * self.voxels)
 
@@ -128,12 +124,12 @@ class Grid:
         return (PROBLEM_BYTES_PER_VOXEL * self.voxels * self.rves,
                 3 * 8 * self.voxels * self.kept_fields)
 
-    def seconds(self, solver: str) -> float:
+    def seconds(self, solver: Solver) -> float:
         """Serial wall time of its packings and solves, s (an order of magnitude): each
         solve three load cases of the cost model (:func:`~itr_fv.solvers.choice.
-        load_case_seconds`) of the solver this grid goes to (:func:`~itr_fv.solvers.choice.
-        grid_solver`: a GPU's small grids to the CPU), as the solves themselves choose."""
-        entry = solver_choice(grid_solver(solver, self.voxels))
+        load_case_seconds`) of the solver this grid goes to (:meth:`~itr_fv.solvers.choice.
+        Solver.for_grid`: a GPU's small grids to the CPU), as the solves themselves choose."""
+        entry = solver.for_grid(self.voxels).entry
         return (self.rves * self.particles * PACK_SECONDS_PER_PARTICLE
                 + self.solves * (SOLVE_OVERHEAD_S + 3 * load_case_seconds(entry, self.voxels)))
 
@@ -157,17 +153,17 @@ class Workload:
     Attributes
     ----------
     grids : tuple of Grid
-    solver : str
-        A resolved solver choice (:mod:`itr_fv.solvers.choice`).
+    solver : Solver
+        The resolved solver (:func:`itr_fv.solvers.choice.resolve_solver`).
     workers : int, optional
         Local Dask worker processes (None: serially in this process).
     scheduler : str, optional
         An external Dask scheduler: its workers' memory is theirs, checked when they
-        are reached (:func:`itr_surrogate.engine.ready_workers`), not here.
+        are reached (:func:`itr_surrogate.cluster.ready_workers`), not here.
     """
 
     grids: tuple[Grid, ...]
-    solver: str
+    solver: Solver
     workers: int | None = None
     scheduler: str | None = None
     #: Processes of this machine that share the grids' solves side by side, each holding
@@ -177,6 +173,9 @@ class Workload:
     def __post_init__(self) -> None:
         if not self.grids:
             raise ValueError("grids: a workload needs at least one grid")
+        if not isinstance(self.solver, Solver):
+            raise ValueError(f"solver: expected a Solver (itr_fv.solvers.choice.resolve_solver), "
+                             f"got {self.solver!r}")
         if isinstance(self.processes, bool) or not isinstance(self.processes, int) \
                 or self.processes < 1:
             raise ValueError(f"processes: expected a whole number >= 1, got "
@@ -189,9 +188,9 @@ class Workload:
     def peak_bytes(self) -> int:
         """Peak of the command's process, bytes: the interpreter and libraries
         (:data:`PROCESS_BASE_BYTES`), the solve on the largest grid, the discrete problems it
-        caches (at most :data:`~itr_surrogate.engine.PROBLEM_CACHE_BYTES`) and the fields it
+        caches (at most :data:`~itr_surrogate.worker.PROBLEM_CACHE_BYTES`) and the fields it
         keeps; on Dask workers, one worker's limit
-        (:func:`~itr_surrogate.engine.worker_memory_limit`)."""
+        (:func:`~itr_surrogate.cluster.worker_memory_limit`)."""
         return self._peak(self.grids)
 
     def _peak(self, grids: Sequence[Grid]) -> int:
@@ -278,9 +277,9 @@ class Workload:
         if avail is not None and not self.scheduler:
             mem += f" of {_gb(avail)} available"
         cores = os.cpu_count() or 1
-        goes_to = {g.n: grid_solver(self.solver, g.voxels) for g in self.grids}
-        routed = {n: to for n, to in sorted(goes_to.items()) if to != self.solver}
-        solver = self.solver + (f", its {', '.join(f'{n}^3' for n in routed)} solves on the "
+        goes_to = {g.n: self.solver.for_grid(g.voxels).key for g in self.grids}
+        routed = {n: to for n, to in sorted(goes_to.items()) if to != self.solver.key}
+        solver = self.solver.key + (f", its {', '.join(f'{n}^3' for n in routed)} solves on the "
                                 f"CPU ({', '.join(sorted(set(routed.values())))}: sooner "
                                 "there by the cost model)" if routed else "")
         time = ("time: on the scheduler's workers" if self.scheduler else
@@ -291,8 +290,8 @@ class Workload:
     def alternatives(self) -> str:
         """One line: what a CUDA device or a Dask scheduler would change (the same grids on
         the ``gpu`` solver's measured speed; the solves spread over a cluster's workers)."""
-        on_gpu = solver_choice(self.solver).device == "cuda"
-        other = replace(self, solver=other_device_solver(self.solver), workers=None,
+        on_gpu = self.solver.device == "cuda"
+        other = replace(self, solver=self.solver.on_other_device(), workers=None,
                         scheduler=None)
         where = (f"on the CPU (--device cpu, solver {other.solver})" if on_gpu
                  else "on a CUDA device (--device cuda)")

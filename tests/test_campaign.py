@@ -161,7 +161,7 @@ def test_warm_start_and_geometry_reuse_give_the_cold_answer(tmp_path):
     CampaignStore(tmp_path).open_for(camp)
     task = camp.tasks()[0]
     # the task writes nothing itself: it returns its rows and RVE for the client to write
-    result = run_task(camp.to_dict(), {**task.__dict__, "set_indices": list(task.set_indices)})
+    result = run_task(camp, task)
     assert CampaignStore(tmp_path).done_tasks() == set()
     assert len(result["rows"]) == result["solves"] == 6
     write_task_result(CampaignStore(tmp_path), result)
@@ -315,10 +315,10 @@ def test_a_failed_task_is_recorded_and_the_others_finish(tmp_path, monkeypatch):
     camp = Campaign.from_dict({**_small_dict(), "replicas": 1, "block_size": 3})
     real = runner.run_task
 
-    def flaky(spec, task):
-        if task["block"] == 1:
+    def flaky(camp, task):
+        if task.block == 1:
             raise RuntimeError("injected failure")
-        return real(spec, task)
+        return real(camp, task)
 
     with LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
                       dashboard_address=None) as cluster:

@@ -117,7 +117,7 @@ def rve():
 
     from itr_fv import Materials
     from itr_fv.rve import FillerSpec, RVESpec, generate_rve
-    from itr_surrogate.engine import RVEData
+    from itr_surrogate.requests import RVEData
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)  # the box cut of the coarse tail
@@ -177,7 +177,7 @@ def test_a_campaign_on_workers_in_another_directory_writes_into_the_clients_fold
     from itr_surrogate.runner import run_task
 
     task = camp.tasks()[0]
-    here = run_task(camp.to_dict(), {**task.__dict__, "set_indices": list(task.set_indices)})
+    here = run_task(camp, task)
     stored = CampaignStore(tmp_path / "tiny").results().to_pylist()
     for row in here["rows"]:
         twin = next(s for s in stored if all(s[k] == row[k] for k in RESULT_KEY))
@@ -223,7 +223,9 @@ def test_itr_identify_on_workers_in_another_directory_keeps_every_solve_on_the_c
 
 def test_the_solve_engine_on_an_external_cluster_keeps_its_store_on_the_client(
         cluster, rve, tmp_path, monkeypatch):
-    from itr_surrogate.engine import SolveEngine, SolveRequest, SolveStore
+    from itr_surrogate.engine import SolveEngine
+    from itr_surrogate.requests import SolveRequest
+    from itr_surrogate.store import SolveStore
 
     address, worker_cwd = cluster
     monkeypatch.chdir(tmp_path)
@@ -247,7 +249,8 @@ def test_the_solve_engine_on_an_external_cluster_keeps_its_store_on_the_client(
 
 def test_a_gpu_solver_is_refused_before_submitting_when_no_worker_declares_a_gpu(
         cluster, rve, tmp_path, monkeypatch, capsys):
-    from itr_surrogate.engine import SolveEngine, SolveRequest
+    from itr_surrogate.engine import SolveEngine
+    from itr_surrogate.requests import SolveRequest
 
     address, _ = cluster
     monkeypatch.chdir(tmp_path)

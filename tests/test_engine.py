@@ -10,10 +10,15 @@ import pytest
 from refusals import refuses
 
 import itr_fft
-from itr_fv import Materials
+from itr_fv import Materials, homogenize
 from itr_fv.rve import FillerSpec, RVESpec, generate_rve
-from itr_surrogate import engine as eng
-from itr_surrogate.engine import RVEData, SolveEngine, SolveRequest, SolveStore
+from itr_fv.solvers.choice import Solver
+from itr_surrogate import cluster as eng
+from itr_surrogate import requests as payloads
+from itr_surrogate import worker
+from itr_surrogate.engine import SolveEngine
+from itr_surrogate.requests import RVEData, SolveRequest
+from itr_surrogate.store import SolveStore
 
 MAT = Materials({"silicone": 0.18, "Al2O3": 30.0}, {("Al2O3", "silicone"): 2e-8},
                 matrix="silicone")
@@ -61,13 +66,13 @@ def test_request_keys_follow_parameters_tolerance_and_solver(rves):
 
 def test_serial_results_are_the_solver_and_a_rerun_reuses_every_solve(rves, tmp_path):
     reqs = _requests(rves, fields=True)
-    builds = eng.geometry_builds()
+    builds = worker.geometry_builds()
     with SolveEngine(tmp_path / "store") as first:
         got = first.solve(reqs)
     assert first.solved == 4 and first.reused == 0
     # one geometry per RVE, not one per solve
-    assert first.geometry_builds == 2 and eng.geometry_builds() - builds == 2
-    direct = itr_fft.homogenize(rves[1][0], reqs[3].materials(), tol=1e-9)
+    assert first.geometry_builds == 2 and worker.geometry_builds() - builds == 2
+    direct = homogenize(rves[1][0], reqs[3].materials, solver="fft", tol=1e-9)
     assert np.allclose(got[3].k_eff, direct.k_eff, rtol=1e-12, atol=0)
     assert np.allclose(got[3].theta, np.stack(direct.theta), rtol=0, atol=1e-12)
     assert SolveStore(tmp_path / "store").count() == 4
@@ -168,8 +173,6 @@ def test_gpu_solves_go_only_to_workers_that_declare_a_gpu(rves, monkeypatch):
     from dask.distributed import Client, LocalCluster
 
     import itr_fv.solvers.choice as choice
-    from itr_fv.solvers.choice import worker_resources
-
     req = SolveRequest.for_materials(rves[0][1], MAT, 1e-8, solver="gpu")
     with LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
                       dashboard_address=None) as plain:
@@ -182,8 +185,8 @@ def test_gpu_solves_go_only_to_workers_that_declare_a_gpu(rves, monkeypatch):
             assert engine.solved == 0 and not plain.scheduler.tasks
     with LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
                       dashboard_address=None) as plain, Client(plain) as client:
-        fut = client.submit(eng._run_payload, eng._payload(req), pure=False,
-                            resources=worker_resources("gpu"))
+        fut = client.submit(worker.run_payload, payloads.request_payload(req), pure=False,
+                            resources=Solver("gpu").resources)
         with pytest.raises(TimeoutError):
             fut.result(timeout=3)  # no worker may take it
         assert fut.status == "pending"
@@ -216,7 +219,7 @@ def test_a_local_cluster_for_gpu_solves_is_refused_where_there_is_no_gpu(rves, t
         pytest.skip("this machine has a GPU: the local cluster would get GPU workers")
     with pytest.raises(ValueError, match=r"^solver 'gpu' solves on a GPU, but this machine "
                        r"has no CUDA device .* choose another solver") as info:
-        eng.open_client(None, None, memory_per_worker=10**9, solver="gpu")
+        eng.open_client(None, None, memory_per_worker=10**9, solver=Solver("gpu"))
     assert "\n" not in str(info.value)
     req = SolveRequest.for_materials(rves[0][1], MAT, 1e-8, solver="gpu")
     with SolveEngine(tmp_path / "s", workers=1, echo=lambda s: None) as engine:
@@ -238,16 +241,16 @@ def test_a_local_cluster_for_gpu_solves_declares_one_gpu_worker_per_device(monke
     own device only; a CPU solver's cluster declares none."""
     monkeypatch.setattr(eng, "cuda_device_count", lambda: 2)
     monkeypatch.delenv("CUDA_VISIBLE_DEVICES", raising=False)
-    client, cluster = eng.open_client(3, None, memory_per_worker=10**9, solver="gpu",
+    client, cluster = eng.open_client(3, None, memory_per_worker=10**9, solver=Solver("gpu"),
                                       echo=lambda s: None)
     try:
         workers = client.scheduler_info()["workers"]
         assert [w["resources"] for w in workers.values()] == [{"GPU": 1}, {"GPU": 1}]
         seen = client.run(lambda: os.environ.get("CUDA_VISIBLE_DEVICES"))
         assert sorted(seen.values()) == ["0", "1"]
-        assert eng.ready_workers(client, None, "gpu") == 2
-        assert eng.ready_workers(client, None, "fft") == 2
+        assert eng.ready_workers(client, None, Solver("gpu")) == 2
+        assert eng.ready_workers(client, None, Solver("fft")) == 2
     finally:
         client.close()
         cluster.close()
-    assert eng.needs_gpu("gpu") and not eng.needs_gpu("fft") and not eng.needs_gpu("mg")
+    assert Solver("gpu").needs_gpu and not Solver("fft").needs_gpu and not Solver("mg").needs_gpu

@@ -161,7 +161,7 @@ def test_reproduce_end_to_end_at_tiny_size(tmp_path):
     assert np.all(np.array(solves["k_xx"]) > 0.05) and max(solves["k_xx"]) > 1.0
     # one record format: full_solves.parquet lists rows of the solve store (OUT/solves),
     # the same keys, tensors and iterations, with this run's labels
-    from itr_surrogate.engine import SolveStore
+    from itr_surrogate.store import SolveStore
     stored = {r["key"]: r for r in SolveStore(out / "solves").table().to_pylist()}
     assert set(solves["key"]) <= set(stored)
     assert "conductivities silicone 0.18, Al2O3 30, AlN 200 W/(m K)" in report

@@ -18,7 +18,8 @@ from pathlib import Path
 import pytest
 
 from itr_identify.cli import main
-from itr_surrogate.engine import SolveStore, clear_problem_cache
+from itr_surrogate.store import SolveStore
+from itr_surrogate.worker import clear_problem_cache
 
 BIN = Path(sys.executable).parent
 #: CI size: gap parametrisation only, 24^3 voxels, two replicas, no leave-one-out.

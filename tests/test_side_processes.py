@@ -57,7 +57,8 @@ def test_the_engine_counts_a_side_processes_solves_as_this_runs(tmp_path):
     from itr_fv.materials import Materials
     from itr_fv.rve.generate import FillerSpec, generate_rve
     from itr_fv.rve.spec import RVESpec
-    from itr_surrogate.engine import RVEData, SolveEngine, SolveRequest
+    from itr_surrogate.engine import SolveEngine
+    from itr_surrogate.requests import RVEData, SolveRequest
 
     with pytest.warns(UserWarning, match="under-represents its coarse particles"):
         ms = generate_rve(RVESpec(5.0, 0.25, max_diameter_box_ratio=0.45),

@@ -7,14 +7,7 @@ import pytest
 from refusals import refused_on_cli, refuses
 
 import itr_fv.solvers.choice as choice
-from itr_fv.solvers.choice import (
-    DEFAULT_SOLVER,
-    SOLVERS,
-    needs_gpu,
-    resolve_solver,
-    solver_backend,
-    worker_resources,
-)
+from itr_fv.solvers.choice import DEFAULT_SOLVER, SOLVERS, Solver, as_solver, resolve_solver
 from itr_identify.cli import main
 from validation.gallery import build
 
@@ -34,7 +27,7 @@ def gpus(monkeypatch):
     ("scipy_fft", "cpu", "scipy_fft"), ("mg", "auto", "mg")])
 def test_choices_without_a_gpu(gpus, solver, device, expected):
     gpus(0)
-    assert resolve_solver(solver, device) == expected
+    assert resolve_solver(solver, device).key == expected
 
 
 @pytest.mark.parametrize("solver, device, expected", [
@@ -43,7 +36,7 @@ def test_choices_without_a_gpu(gpus, solver, device, expected):
     ("fft", None, "fft")])
 def test_choices_with_a_gpu(gpus, solver, device, expected):
     gpus(1)
-    assert resolve_solver(solver, device) == expected
+    assert resolve_solver(solver, device).key == expected
 
 
 def test_refusals_name_the_argument(gpus):
@@ -52,7 +45,7 @@ def test_refusals_name_the_argument(gpus):
         resolve_solver("fft", "cuda", device_argument="--device")
     with refuses(ValueError, "--solver"):
         resolve_solver("gpu", solver_argument="--solver")
-    assert resolve_solver("gpu", "cuda", local=False) == "gpu"  # the workers' business
+    assert resolve_solver("gpu", "cuda", local=False).key == "gpu"  # the workers' business
     gpus(1)
     with pytest.raises(ValueError, match=r"^device: the solver 'fv' runs on the CPU, not on "
                        r"'cuda'; use --device cpu, or a solver for 'cuda' \('gpu'\)"):
@@ -69,9 +62,10 @@ def test_each_choice_declares_its_backend_device_and_worker_resources():
     assert DEFAULT_SOLVER in SOLVERS
     assert {n: c.backend for n, c in SOLVERS.items()} == {
         "fft": "itr_fft", "mg": "itr_fft", "fv": "itr_fv", "gpu": "array_api"}
-    assert worker_resources("gpu") == {"GPU": 1} and needs_gpu("gpu")
-    assert all(worker_resources(n) is None and not needs_gpu(n) for n in ("fft", "mg", "fv"))
-    backend = solver_backend("mg", threads=1)
+    assert Solver("gpu").resources == {"GPU": 1} and Solver("gpu").needs_gpu
+    assert all(Solver(n).resources is None and not Solver(n).needs_gpu
+               for n in ("fft", "mg", "fv"))
+    backend = Solver("mg").backend(1)
     assert backend.name == "itr_fft" and backend.options()["preconditioner"] == "multigrid"
     assert backend.device_bytes_per_voxel() == 0  # a host backend: nothing on a device
 
@@ -96,7 +90,7 @@ def test_the_memory_guard_checks_device_memory_for_a_device_backend():
     assert check_device_memory((100, 100, 100), OnDevice(), free=10**9) == 10**8
     with pytest.raises(InsufficientMemoryError, match=r"of GPU memory but 0\.1 GB is free"):
         check_device_memory((100, 100, 100), OnDevice(), free=10**8)
-    assert check_device_memory((100, 100, 100), solver_backend("fft"), free=0) == 0
+    assert check_device_memory((100, 100, 100), Solver("fft").backend(), free=0) == 0
 
 
 @pytest.mark.parametrize("command", [
@@ -192,7 +186,8 @@ def test_a_gpu_solve_runs_only_on_the_worker_that_declares_a_gpu(monkeypatch):
     from dask.distributed import Client, Scheduler, SpecCluster, Worker, get_task_stream
 
     from itr_fv import Materials
-    from itr_surrogate.engine import RVEData, SolveEngine, SolveRequest
+    from itr_surrogate.engine import SolveEngine
+    from itr_surrogate.requests import RVEData, SolveRequest
 
     stand_in = dict(SOLVERS)
     stand_in["gpu"] = choice.SolverChoice("gpu", "array_api",
@@ -227,7 +222,10 @@ def test_small_grids_of_a_gpu_choice_go_to_the_cpu_by_the_cost_model(gpus):
     the cost model a 48^3 grid (itr reproduce's) goes to the CPU's default solver on 2 and
     on 16 cores, a 256^3 grid stays on the GPU, and the crossover moves to larger grids
     with more CPU cores; CPU choices are never moved."""
-    from itr_fv.solvers.choice import CPU_THREAD_EXPONENT, grid_solver, load_case_seconds
+    from itr_fv.solvers.choice import CPU_THREAD_EXPONENT, load_case_seconds
+
+    def grid_solver(name, voxels, threads):
+        return Solver(name).for_grid(voxels, threads=threads).key
 
     assert grid_solver("gpu", 48 ** 3, threads=2) == grid_solver("gpu", 48 ** 3,
                                                                  threads=16) == "fft"
@@ -244,16 +242,39 @@ def test_small_grids_of_a_gpu_choice_go_to_the_cpu_by_the_cost_model(gpus):
     assert load_case_seconds(fft, 10 ** 6) == pytest.approx(10 ** 6 * fft.seconds_per_voxel)
     # the backend object follows: a small grid of the gpu choice gets the CPU's backend
     gpus(1)
-    assert solver_backend("gpu", voxels=48 ** 3).name == "itr_fft"
+    assert Solver("gpu").backend(voxels=48 ** 3).name == "itr_fft"
 
 
 def test_the_plan_of_a_gpu_run_on_small_grids_is_the_cpus_and_says_so():
     from itr_surrogate.workload import Grid, Workload
 
     small = (Grid("paper", 12.0, 0.25, rves=3, solves=40, particles=200),)
-    on_gpu, on_cpu = Workload(small, "gpu"), Workload(small, "fft")
+    on_gpu, on_cpu = Workload(small, Solver("gpu")), Workload(small, Solver("fft"))
     assert on_gpu.seconds() == on_cpu.seconds()
     assert "its 48^3 solves on the CPU (fft" in on_gpu.summary()
     large = (Grid("faithful", 64.0, 0.125, rves=1, solves=3, particles=1500),)
-    assert Workload(large, "gpu").seconds() < Workload(large, "fft").seconds() / 5
-    assert "on the CPU" not in Workload(large, "gpu").summary()
+    assert Workload(large, Solver("gpu")).seconds() < Workload(large, Solver("fft")).seconds() / 5
+    assert "on the CPU" not in Workload(large, Solver("gpu")).summary()
+
+
+def test_a_solver_is_one_frozen_object_resolved_once():
+    """resolve_solver gives a frozen Solver: method, options, device and key; it is equal to
+    another by its key, travels to a Dask worker (pickle) and back from its key unchanged;
+    "auto" is resolved when the Solver is made and never carried."""
+    import dataclasses
+    import pickle
+
+    s = resolve_solver("fft", dtype=np.float32, preconditioner="multigrid")
+    assert (s.method, s.device, s.options) == ("fft", "cpu", {"dtype": "float32",
+                                                              "preconditioner": "multigrid"})
+    assert s.key == 'fft{"dtype": "float32", "preconditioner": "multigrid"}'
+    assert as_solver(s.key) == s and pickle.loads(pickle.dumps(s)) == s
+    assert hash(as_solver("mg")) == hash(Solver("mg")) and Solver("mg") != Solver("fft")
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        s.method = "fv"
+    backend = s.backend(1)
+    assert backend.dtype == np.float32 and backend.options()["preconditioner"] == "multigrid"
+    assert as_solver("auto").key == "fft" and as_solver(None) == Solver(DEFAULT_SOLVER)
+    for bad in ("quantum", 3, 'fft{"dtype": '):
+        with pytest.raises(ValueError, match=r"^solver: "):
+            as_solver(bad)

@@ -11,6 +11,8 @@ import time
 from pathlib import Path
 
 import pytest
+
+from itr_fv.solvers.choice import Solver
 from refusals import refuses
 
 from itr_fv.rve import FillerSpec, build_rve
@@ -116,17 +118,17 @@ def test_memory_is_the_solvers_measured_cost_plus_what_the_run_holds():
     g = Grid("g", 12.0, 0.25, rves=10, solves=20, fields=True, kept_fields=4)
     n = 48 ** 3
     solve = estimate_peak_memory((48, 48, 48), "itr_fft", store_fields=True) + 64 * n
-    assert g.solve_bytes("fft") == solve
-    w = Workload((g,), "fft")
+    assert g.solve_bytes(Solver("fft")) == solve
+    w = Workload((g,), Solver("fft"))
     assert w.peak_bytes() == PROCESS_BASE_BYTES + solve + 10 * 64 * n + 4 * 3 * 8 * n
     # a Dask worker is sized as the engine sizes it: the task plus its base, at the pause mark
-    from itr_surrogate.engine import worker_memory_limit
-    assert Workload((g,), "fft", workers=2).peak_bytes() == worker_memory_limit(solve)
+    from itr_surrogate.cluster import worker_memory_limit
+    assert Workload((g,), Solver("fft"), workers=2).peak_bytes() == worker_memory_limit(solve)
 
 
 def test_the_refusal_names_the_largest_grid_that_fits():
     big = Grid("big", 24.0, 0.02, rves=1, solves=1)             # 1200^3
-    w = Workload((Grid("small", 12.0, 0.25, rves=3, solves=9), big), "fft")
+    w = Workload((Grid("small", 12.0, 0.25, rves=3, solves=9), big), Solver("fft"))
     assert w.largest is big
     with pytest.raises(WorkloadRefused) as err:
         w.check(available=8 * 10**9)
@@ -135,9 +137,9 @@ def test_the_refusal_names_the_largest_grid_that_fits():
     fit = int(msg.split("at most ~")[1].split("^3")[0])
     # the grid it names fits, one voxel per edge more does not
     ok = Workload((Grid("small", 12.0, 0.25, rves=3, solves=9),
-                   Grid("big", 24.0, 24.0 / fit, rves=1, solves=1)), "fft")
+                   Grid("big", 24.0, 24.0 / fit, rves=1, solves=1)), Solver("fft"))
     over = Workload((Grid("small", 12.0, 0.25, rves=3, solves=9),
-                     Grid("big", 24.0, 24.0 / (fit + 1), rves=1, solves=1)), "fft")
+                     Grid("big", 24.0, 24.0 / (fit + 1), rves=1, solves=1)), Solver("fft"))
     assert ok.refusal(available=8 * 10**9) is None
     assert over.refusal(available=8 * 10**9) is not None
     assert w.refusal(available=10**15) is None
@@ -145,14 +147,14 @@ def test_the_refusal_names_the_largest_grid_that_fits():
 
 def test_an_external_scheduler_is_not_judged_by_this_machine():
     big = Grid("big", 24.0, 0.02, rves=1, solves=1)
-    assert Workload((big,), "fft", scheduler="tcp://x:8786").refusal(available=10**9) is None
+    assert Workload((big,), Solver("fft"), scheduler="tcp://x:8786").refusal(available=10**9) is None
 
 
 def test_time_grows_with_solves_voxels_and_particles():
     a = Grid("a", 12.0, 0.25, rves=3, solves=10, particles=70)
     b = Grid("b", 12.0, 0.125, rves=3, solves=10, particles=70)
-    assert Workload((b,), "fft").seconds() > Workload((a,), "fft").seconds()
-    assert Workload((a,), "fv").seconds() > Workload((a,), "fft").seconds()
+    assert Workload((b,), Solver("fft")).seconds() > Workload((a,), Solver("fft")).seconds()
+    assert Workload((a,), Solver("fv")).seconds() > Workload((a,), Solver("fft")).seconds()
 
 
 def test_side_by_side_processes_each_count_in_the_peak_and_the_plan_says_so():
@@ -164,12 +166,12 @@ def test_side_by_side_processes_each_count_in_the_peak_and_the_plan_says_so():
     from itr_surrogate.workload import PROCESS_BASE_BYTES, Workload
 
     g = Grid("g", 12.0, 0.25, rves=10, solves=20, fields=True, kept_fields=4)
-    alone = Workload((g,), "fft")
-    two = Workload((g,), "fft", processes=2)
+    alone = Workload((g,), Solver("fft"))
+    two = Workload((g,), Solver("fft"), processes=2)
     assert two.peak_bytes() == 2 * alone.peak_bytes() + PROCESS_BASE_BYTES
     assert "in this process and 2 side processes" in two.summary()
     with refuses(ValueError, "processes"):
-        Workload((g,), "fft", processes=0)
+        Workload((g,), Solver("fft"), processes=0)
     comps = {"Al2O3-60": {"Al2O3": 0.6}, "AlN-60": {"AlN": 0.6}}
     both = identification_workload(ForwardSettings(), comps, ["area", "gap"], validation=True)
     one = identification_workload(ForwardSettings(), comps, ["gap"], validation=True)

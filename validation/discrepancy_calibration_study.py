@@ -64,7 +64,8 @@ from itr_identify.discrepancy.tables import build_tables, n_solves
 from itr_identify.forward.fidelity import faithful_for
 from itr_identify.inference.formulations import fractions_of
 from itr_identify.inference.measurements import Measurements, read_measurements
-from itr_surrogate.engine import RVEData, SolveEngine, SolveRequest
+from itr_surrogate.engine import SolveEngine
+from itr_surrogate.requests import RVEData, SolveRequest
 
 _spec = importlib.util.spec_from_file_location(
     "discrepancy_truth_study", Path(__file__).with_name("discrepancy_truth_study.py"))

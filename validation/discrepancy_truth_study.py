@@ -70,7 +70,8 @@ from itr_identify.forward.fidelity import FaithfulRVE, faithful_for
 from itr_identify.forward.model import ForwardSettings
 from itr_identify.inference.formulations import fractions_of
 from itr_identify.inference.measurements import Measurements, read_measurements
-from itr_surrogate.engine import RVEData, SolveEngine, SolveRequest
+from itr_surrogate.engine import SolveEngine
+from itr_surrogate.requests import RVEData, SolveRequest
 
 MATRIX = "silicone"
 THICKNESS_MM = (0.5, 1.0, 1.5)

@@ -122,7 +122,8 @@ def solve(store: Path) -> dict:
     """The truth ratios k_effect / k_base on the 28 um RVEs and the sample densities."""
     from itr_fv.io import write_text
     from itr_identify.inference.formulations import fractions_of
-    from itr_surrogate.engine import RVEData, SolveEngine, SolveRequest
+    from itr_surrogate.engine import SolveEngine
+    from itr_surrogate.requests import RVEData, SolveRequest
 
     truth = _load("discrepancy_truth_study")
     path = store / "effect_truths.json"

@@ -323,7 +323,7 @@ def main() -> int:
     out.mkdir(parents=True, exist_ok=True)
     from concurrent.futures import ProcessPoolExecutor
 
-    from itr_surrogate.runner import _task_dict, run_task, write_task_result
+    from itr_surrogate.runner import run_task, write_task_result
     from itr_surrogate.store import CampaignStore
 
     pool = None
@@ -373,7 +373,7 @@ def main() -> int:
         try:
             packed = ahead.pop(i).result() if pool is not None else None
             tp = time.perf_counter() - t
-            result = run_task(camp.to_dict(), _task_dict(task), packed)
+            result = run_task(camp, task, packed)
         except Exception as exc:  # noqa: BLE001 - a task's failure is recorded, not fatal
             store.record_failure(task.task_id, f"{type(exc).__name__}: {exc}")
             log(f"{fold} {task.task_id}: FAILED {type(exc).__name__}: {exc}", out)

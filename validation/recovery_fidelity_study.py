@@ -50,7 +50,7 @@ def truth_k(filler: str, engine) -> dict[str, dict]:
     from itr_identify.forward.fidelity import BIAS_ORDER, richardson
     from itr_identify.forward.model import PARAMETRISATIONS, ForwardModel, ForwardSettings
     from itr_identify.inference.formulations import fractions_of
-    from itr_surrogate.engine import RVEData, SolveRequest
+    from itr_surrogate.requests import RVEData, SolveRequest
 
     h, H = TRUTH_VOXELS_UM
     spec = RVESpec(box_um=TRUTH_BOX_UM, voxel_um=h, seed=TRUTH_SEED)

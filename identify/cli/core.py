@@ -21,6 +21,10 @@ import shutil
 import sys
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from itr_fv.solvers.choice import Solver
 
 __all__ = ["CLIError", "Parser", "number", "FLAG_NAMES", "flagged", "output_folder", "planned",
            "refuse_unfit",
@@ -263,8 +267,8 @@ def solver_arguments(p: argparse.ArgumentParser, *, default: str | None = None) 
                    f"{DEFAULT_DEVICE} but for gpu); fft on cuda is the gpu solver")
 
 
-def solver_option(args: argparse.Namespace, solver: str | None = None) -> str:
-    """The resolved solver choice of --solver (else ``solver``) and --device; a CLIError
+def solver_option(args: argparse.Namespace, solver: Solver | None = None) -> Solver:
+    """The resolved solver of --solver (else ``solver``) and --device; a CLIError
     (status 2) naming the flag when they do not go together or no CUDA device is seen.
     With --scheduler the device is the workers' business: ``cuda`` is not checked here
     (the engine refuses before submitting when no worker declares a GPU)."""

@@ -127,10 +127,10 @@ def _build(args: argparse.Namespace) -> int:
                 raise CLIError(str(exc), 2) from None
             failed += summary.tasks_failed
         data = assemble(plan, [out, *(Path(d) for d in args.solved_in or ())],
-                        provenance={"solver": solver})
+                        provenance={"solver": solver.key})
         path = write_text(out / "corrections.json", json.dumps(data, indent=1) + "\n")
         write_manifest(out, [path], {"plan": args.file, "systems": list(systems or []),
-                                     "solver": solver}, job="corrections build")
+                                     "solver": solver.key}, job="corrections build")
     print(f"wrote {path} ({len(data['points'])} points, systems: "
           f"{', '.join(data['systems']) or 'none fitted yet'})")
     return 1 if failed else 0

@@ -20,7 +20,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from itr_fv.rve import build_rve
-from itr_surrogate.engine import RVEData, SolveEngine, SolveRequest
+from itr_surrogate.engine import SolveEngine
+from itr_surrogate.requests import RVEData, SolveRequest
 
 from ..forward.fidelity import Correction
 from ..forward.model import PARAMETRISATIONS, ForwardModel, filler_specs

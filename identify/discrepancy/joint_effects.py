@@ -33,7 +33,8 @@ from collections.abc import Callable, Mapping, Sequence
 
 import numpy as np
 
-from itr_surrogate.engine import RVEData, SolveEngine, SolveRequest
+from itr_surrogate.engine import SolveEngine
+from itr_surrogate.requests import RVEData, SolveRequest
 
 from ..forward.model import ForwardModel
 from ..inference.effect_terms import EffectParameter, JointEffect, RatioTable

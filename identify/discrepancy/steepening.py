@@ -400,7 +400,7 @@ class InterphaseShell(Effect):
     contacts take the same homogenised value.
 
     Not resolved in the voxels: the solve engine rebuilds every RVE from its sphere table
-    (:class:`itr_surrogate.engine.RVEData`), and :meth:`Microstructure.from_spheres` gives
+    (:class:`itr_surrogate.requests.RVEData`), and :meth:`Microstructure.from_spheres` gives
     a voxel inside two concentric spheres to the larger one, so a core-shell particle has
     no sphere form; a shell as a phase of its own labels would also turn every
     filler-shell face into a particle contact under the gap contact model. The

@@ -14,7 +14,8 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from itr_fv.materials.parameters import parameter_name
-from itr_surrogate.engine import RVEData, SolveEngine, SolveRequest
+from itr_surrogate.engine import SolveEngine
+from itr_surrogate.requests import RVEData, SolveRequest
 
 from ..forward.fidelity import Correction
 from ..forward.model import PARAMETRISATIONS, ForwardModel, shipped_factor

@@ -88,7 +88,7 @@ from itr_fv.materials import default_system
 from itr_fv.materials.material_system import MaterialSystem
 from itr_fv.rve.from_powders import faithful_box, voxel_for
 from itr_fv.rve.spec import RVESpec
-from itr_fv.solvers.choice import check_solver
+from itr_fv.solvers.choice import Solver, as_solver
 from itr_surrogate.campaign import Campaign
 
 from .fidelity import CHEAP_REPLICAS, CHEAP_TOL, cheap_rve_for
@@ -264,7 +264,7 @@ class CorrectionPlan:
     name: str
     packings: int
     seed: int
-    solver: str
+    solver: Solver
     tol: float
     systems: tuple[CorrectionSystem, ...]
     material: MaterialSystem = field(default_factory=default_system)
@@ -299,7 +299,7 @@ class CorrectionPlan:
         if isinstance(tol, bool) or not isinstance(tol, (int, float)) or not 0 < tol < 1:
             raise ValueError(f"tol: expected a relative residual in (0, 1), got {tol!r}")
         plan = cls(name, packings, _whole(data.get("seed", 9101), 1, "seed"),
-                   check_solver(data.get("solver")), float(tol), systems, material)
+                   as_solver(data.get("solver")), float(tol), systems, material)
         for s in plan.systems:   # every campaign checks its own keys before any work
             try:
                 plan.campaigns(systems=(s.name,))
@@ -315,7 +315,7 @@ class CorrectionPlan:
                          f"{', '.join(s.name for s in self.systems)})")
 
     def _campaign(self, name: str, rve: RVESpec, *, formulations: tuple[str, ...],
-                  design: dict[str, Any], replicas: int, tol: float, solver: str | None,
+                  design: dict[str, Any], replicas: int, tol: float, solver: Solver | None,
                   threads: int = 1) -> Campaign:
         n_sets = (math.prod(len(v) for v in design["values"].values())
                   if design["kind"] == "grid" else len(design["points"]))
@@ -332,7 +332,7 @@ class CorrectionPlan:
         0.25 um)."""
         return cheap_rve_for(self.material)
 
-    def table_campaign(self, system: str, *, solver: str | None = None,
+    def table_campaign(self, system: str, *, solver: Solver | None = None,
                        threads: int = 1) -> Campaign:
         """The campaign of a system's table: its formulations at the table box and voxel,
         :attr:`packings` packings (seeds ``seed, seed + 1, ...``), every resistance."""
@@ -342,16 +342,16 @@ class CorrectionPlan:
                               design=s.design, replicas=self.packings, tol=self.tol,
                               solver=solver, threads=threads)
 
-    def cheap_campaign(self, system: str, *, solver: str | None = None) -> Campaign:
+    def cheap_campaign(self, system: str, *, solver: Solver | None = None) -> Campaign:
         """The campaign of one system's cheap RVEs (the replicas the reduced basis of
         ``itr reproduce`` is fitted on), at the table's design."""
         s = self.system(system)
         return self._campaign(f"{self.name}-{s.name}-cheap", self.cheap_rve,
                               formulations=s.formulations, design=s.design,
                               replicas=CHEAP_REPLICAS, tol=CHEAP_TOL,
-                              solver=check_solver(solver))
+                              solver=as_solver(solver))
 
-    def study_campaigns(self, system: str, kind: str, *, solver: str | None = None,
+    def study_campaigns(self, system: str, kind: str, *, solver: Solver | None = None,
                         threads: int = 1) -> list[Campaign]:
         """The campaigns of one study of a system, one per box, voxel or quantile."""
         s = self.system(system)
@@ -371,7 +371,7 @@ class CorrectionPlan:
                                threads=threads)
                 for n, rve in zip(st.campaign_names(), rves)]
 
-    def campaigns(self, *, systems: tuple[str, ...] | None = None, solver: str | None = None,
+    def campaigns(self, *, systems: tuple[str, ...] | None = None, solver: Solver | None = None,
                   threads: int = 1) -> list[tuple[str, Campaign]]:
         """Every (sub-folder, campaign) of the plan's ``systems`` (default: all): the cheap
         ones first (minutes), then system by system its studies and its table. A

@@ -408,7 +408,7 @@ def assemble(plan: CorrectionPlan, roots: Sequence[str | Path] | str | Path, *,
             "boxes_um": {s.name: s.box_um for s in plan.systems},
             "voxels_um": {s.name: s.voxel_um for s in plan.systems},
             "packings": plan.packings,
-            "seeds": [plan.seed + j for j in range(plan.packings)], "solver": plan.solver,
+            "seeds": [plan.seed + j for j in range(plan.packings)], "solver": plan.solver.key,
             "tol": plan.tol, "orders": {n: [{"values": p["values"], "order": p["order"],
                                              "order_interval": p["order_interval"]}
                                             for p in s["shared"]["voxel"]["points"]]

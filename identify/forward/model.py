@@ -39,16 +39,11 @@ from itr_fv.materials.material_system import MaterialSystem
 from itr_fv.materials.parameters import parameter_name
 from itr_fv.rve import FillerSpec, build_rve
 from itr_fv.rve.spec import RVESpec
-from itr_fv.solvers.choice import check_solver, default_solver
-from itr_surrogate.engine import (
-    RVEData,
-    SolveEngine,
-    SolveRequest,
-    SolveResult,
-    cached_problem,
-    solve_row,
-)
+from itr_fv.solvers.choice import Solver, as_solver, default_solver
+from itr_surrogate.engine import SolveEngine
 from itr_surrogate.reduced_basis import ReducedBasis
+from itr_surrogate.requests import RVEData, SolveRequest, SolveResult, solve_row
+from itr_surrogate.worker import cached_problem
 
 from .fidelity import CHEAP_REPLICAS, Correction, FaithfulRVE, direction_scatter
 from .shipped import ShippedCorrections, ShippedFactor
@@ -138,9 +133,10 @@ class ForwardSettings:
         Full solves per reduced basis at most.
     solver_tol : float
         Relative residual of every full solve.
-    solver : str
-        The resolved solver choice of every full solve (:func:`itr_fv.solvers.choice.
-        resolve_solver`: ``"fft"`` by default, ``"gpu"`` on a CUDA device, ``"mg"``, ...).
+    solver : Solver or str
+        The solver of every full solve (a name is resolved once, here:
+        :func:`itr_fv.solvers.choice.as_solver`; ``"fft"`` by default, ``"gpu"`` on a CUDA
+        device, ``"mg"``, ...).
     psd_basis : {"number", "volume"}
         Weighting of Table 1's lognormal (mu, sigma): ``"number"`` (default; the paper's
         Table 1 reads as number-weighted, E[D] = exp(mu + sigma^2 / 2) matches its mean
@@ -162,7 +158,7 @@ class ForwardSettings:
     rb_tol: float = 2e-3
     rb_max_solves: int = 30
     solver_tol: float = 1e-8
-    solver: str = field(default_factory=default_solver)
+    solver: Solver = field(default_factory=default_solver)
     psd_basis: str = "number"
     faithful: FaithfulRVE | None = None
     system: MaterialSystem = field(default_factory=default_system)
@@ -179,7 +175,7 @@ class ForwardSettings:
                              f"{self.psd_basis!r}")
         if not isinstance(self.rve, RVESpec):
             raise ValueError(f"rve: expected an RVESpec, got {type(self.rve).__name__}")
-        check_solver(self.solver)
+        object.__setattr__(self, "solver", as_solver(self.solver))
         if not isinstance(self.replicas, int) or self.replicas < 2:
             raise ValueError(f"replicas: expected a whole number >= 2 (the RVE scatter needs "
                              f"two), got {self.replicas!r}")
@@ -201,6 +197,7 @@ class ForwardSettings:
         d = {f.name: getattr(self, f.name) for f in fields(self)
              if f.name not in ("rve", "system", "faithful")}
         d["system"] = self.system.to_dict()
+        d["solver"] = self.solver.key
         d["prior_m2K_per_W"] = list(self.prior_m2K_per_W)
         d["faithful"] = self.faithful.to_dict() if self.faithful is not None else None
         return {**self.rve.to_dict(), **d}
@@ -249,14 +246,15 @@ def shipped_factor(settings: ForwardSettings, parametrisation: Parametrisation,
 
 
 def full_solve(ms, materials: Materials, tol: float, *, engine: SolveEngine | None = None,
-               solver: str | None = None, **labels) -> np.ndarray:
+               solver: Solver | None = None, **labels) -> np.ndarray:
     """Diagonal of k_eff (3,), W/(m K), of ``ms`` (a packed Microstructure, or its
     :class:`~itr_fv.discrete.problem.DiscreteProblem`) by a full solve on the solve engine
     (:mod:`itr_surrogate.engine`; default: this process, no store). The engine keeps one
     discrete problem per RVE, so many solves of one RVE build its geometry once; the
     per-area contact model's VoxelContactWarning is silenced there (that parametrisation is
-    tied to its voxel on purpose; the report says so). ``solver`` is a resolved choice of
-    :mod:`itr_fv.solvers.choice`; ``labels`` go with the stored row."""
+    tied to its voxel on purpose; the report says so). ``solver``: the resolved
+    :class:`~itr_fv.solvers.choice.Solver` (None: the default); ``labels`` go with the
+    stored row."""
     if isinstance(ms, DiscreteProblem):
         ms = ms.microstructure
     request = SolveRequest.for_materials(RVEData.of(ms), materials, tol, solver=solver,

@@ -10,7 +10,6 @@ import numpy as np
 from itr_fv.materials import paper_data
 from itr_fv.materials.parameters import parse_parameter
 from itr_fv.rve.spec import SEED_STRIDE
-from itr_fv.solvers.choice import solver_choice
 
 from ..inference.free_inputs_fit import describe as describe_free
 from ..inference.joint import CHAIN_TAUS, PROPOSAL_TAUS
@@ -360,8 +359,8 @@ def settings_lines(idents: Mapping[str, Identification], extra: Mapping[str, obj
              f"(the reduced bases span {s.prior_m2K_per_W[0]:g} - {s.prior_m2K_per_W[1]:g}); "
              "screening grid 1e-8 - 1e-5 (the paper's)",
              f"- reduced basis: relative bound gap {s.rb_tol:g}, at most {s.rb_max_solves} "
-             f"full solves; full solves by the solver {s.solver!r} "
-             f"({solver_choice(s.solver).summary or s.solver}) at relative residual "
+             f"full solves; full solves by the solver {s.solver.key!r} "
+             f"({s.solver.summary}) at relative residual "
              f"{s.solver_tol:g}"]
     for par, i in idents.items():
         c = next(iter(i.models.values())).parametrisation

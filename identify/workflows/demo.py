@@ -31,7 +31,7 @@ from itr_fv.materials import default_system, is_default_system, paper_data
 from itr_fv.materials.material_system import MaterialSystem
 from itr_fv.materials.parameters import parameter_name
 from itr_fv.rve.spec import RVESpec
-from itr_fv.solvers.choice import check_solver, default_solver
+from itr_fv.solvers.choice import Solver, as_solver, default_solver
 
 __all__ = ["DemoSettings", "run_demo", "demo_workload", "PAPER_R", "VOXEL_BIAS", "DEMO_SCATTER"]
 
@@ -78,7 +78,7 @@ class DemoSettings:
 
     rve: RVESpec = RVESpec(box_um=16.0, voxel_um=0.16)
     fraction: float = 0.55
-    solver: str = field(default_factory=default_solver)
+    solver: Solver = field(default_factory=default_solver)
     tol: float = 1e-8
     system: MaterialSystem = field(default_factory=default_system)
 
@@ -104,7 +104,7 @@ class DemoSettings:
         if self.rve.n > MAX_DEMO_VOXELS:
             raise ValueError(f"box_um/voxel_um: {self.rve.n}^3 voxels is beyond the demo's "
                              f"{MAX_DEMO_VOXELS}^3 limit")
-        check_solver(self.solver)
+        object.__setattr__(self, "solver", as_solver(self.solver))
 
     box_um = property(lambda self: self.rve.box_um, doc="RVE edge, um.")
     voxel_um = property(lambda self: self.rve.voxel_um, doc="Voxel edge, um.")
@@ -116,6 +116,7 @@ class DemoSettings:
         d = asdict(self)
         del d["rve"]
         d["system"] = self.system.to_dict()
+        d["solver"] = self.solver.key
         return {**self.rve.to_dict(), **d}
 
 
@@ -177,12 +178,10 @@ def run_demo(settings: DemoSettings, out: Path, echo=print) -> list[Path]:
 
     ``out`` must exist and be writable; earlier demo files in it are replaced.
     """
-    from itr_fv import Materials
+    from itr_fv import Materials, homogenize
     from itr_fv.io import write_text
     from itr_fv.run_folder import begin_run, write_manifest
     from itr_fv.rve import build_rve
-    from itr_fv.solvers.choice import solver_backend
-    from itr_fv.solvers.driver import homogenize
 
     begin_run(out, "demo")
     t0 = time.perf_counter()
@@ -199,8 +198,8 @@ def run_demo(settings: DemoSettings, out: Path, echo=print) -> list[Path]:
          f"({r_source})")
     mat = Materials(system.conductivities([filler]), {(filler, matrix): r}, matrix=matrix,
                     contact="gap")
-    backend = solver_backend(settings.solver, voxels=math.prod(ms.shape))
-    res = homogenize(ms, mat, backend=backend, tol=settings.tol)
+    backend = settings.solver.backend(voxels=math.prod(ms.shape))
+    res = homogenize(ms, mat, solver=backend, tol=settings.tol)
     echo(res.summary())
     k_iso = float(np.trace(res.k_eff) / 3.0)
     echo(f"k_iso = {k_iso:.4f} W/(m K), solver {res.solver}")

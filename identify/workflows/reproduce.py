@@ -134,7 +134,7 @@ def _bar(total: int, desc: str, progress: bool, unit: str = "solve"):
 
 def write_solves(idents: Sequence[Identification], path: Path) -> Path:
     """Every full solve of the run as one Parquet table (atomic): the solve store's rows
-    (:func:`itr_surrogate.engine.solve_row`: key, RVE, parameters, the raw tensor of that
+    (:func:`itr_surrogate.requests.solve_row`: key, RVE, parameters, the raw tensor of that
     RVE, iterations, labels) with the parametrisation that asked for them and, for the
     solves of the cheap RVEs, their value at the fidelity level: ``level`` (``runtime``,
     ``shipped`` or ``none``: :meth:`~itr_identify.forward.model.ForwardModel.level_at` at
@@ -171,9 +171,9 @@ def _temperature_field(ident: Identification, formulation: str, out: Path) -> li
     the .vti holds the whole tensor), its .vti, a render and a temperature figure, whose k
     is said raw and at the fidelity level (on this process's cached problem of that RVE: its
     geometry is not built again)."""
-    from itr_fv.solvers.choice import solver_backend
-    from itr_fv.solvers.driver import homogenize
-    from itr_surrogate.engine import RVEData, cached_problem
+    from itr_fv import homogenize
+    from itr_surrogate.requests import RVEData
+    from itr_surrogate.worker import cached_problem
 
     m = ident.models[formulation]
     best = {p: ident.quoted[p] for p in m.parameters}
@@ -181,8 +181,8 @@ def _temperature_field(ident: Identification, formulation: str, out: Path) -> li
     problem = cached_problem(RVEData.of(m.microstructures[0]), mat.contact)[0]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        backend = solver_backend(ident.settings.solver, voxels=math.prod(problem.shape))
-        res = homogenize(problem, mat, backend=backend,
+        backend = ident.settings.solver.backend(voxels=math.prod(problem.shape))
+        res = homogenize(problem, mat, solver=backend,
                          tol=ident.settings.solver_tol)
     level = m.level_at(best)
     name = fidelity_name(ident.settings.faithful)

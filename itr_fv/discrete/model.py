@@ -1,7 +1,7 @@
 """The discrete model: face conductances with interface resistance, load vectors, fluxes.
 
-Both solvers (``itr_fv.homogenize`` and ``itr_fft.homogenize``) solve exactly the system
-defined here. Cell-centred finite volumes on an n1 x n2 x n3 periodic grid of cubic voxels
+Every solver of ``itr_fv.homogenize`` (pyamg, FFT, multigrid, array API) solves exactly the
+system defined here. Cell-centred finite volumes on an n1 x n2 x n3 periodic grid of cubic voxels
 of edge h. The face between voxel p and its neighbour q = p + e_d carries the conductance
 per unit area (W/(m^2 K))::
 

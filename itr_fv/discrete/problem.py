@@ -9,7 +9,7 @@ microstructure, so a campaign builds it once per RVE::
 
     problem = DiscreteProblem(ms, contact="gap")
     for mat in parameter_sets:
-        res = itr_fft.homogenize(problem, mat)
+        res = itr_fv.homogenize(problem, mat, solver="fft")
 
 The conductances come from the geometry's class arrays
 (:mod:`itr_fv.discrete.face_classes`) by one elementwise pass in any array API namespace:

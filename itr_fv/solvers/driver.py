@@ -4,11 +4,12 @@
 any work, builds the discrete system once, hands each load case's load vector to the
 backend (:mod:`itr_fv.solvers.backends`), fixes the gauge and builds the
 :class:`~itr_fv.solvers.result.HomogenizationResult` (tensor, fields, convergence verdict) once.
-``itr_fv.homogenize`` and ``itr_fft.homogenize`` are thin entry points onto it::
+It is ``itr_fv.homogenize``, the package's one door to a solve::
 
-    from itr_fv.solvers.driver import homogenize
-    res = homogenize(problem, mat, backend="itr_fft", tol=1e-8)
-    res = homogenize(problem, mat, backend=backend_for("itr_fft", dtype=np.float32), tol=2e-6)
+    from itr_fv import homogenize
+    from itr_fv.solvers.choice import resolve_solver
+    res = homogenize(problem, mat, solver="fft", tol=1e-8)
+    res = homogenize(problem, mat, solver=resolve_solver("fft", dtype=np.float32), tol=2e-6)
 
 Every stage runs where the backend's arrays live: the load vector is built on the prepared
 system's conductances ``g``, the solution stays where the backend left it, and the cluster
@@ -36,7 +37,7 @@ from ..materials.properties import Materials
 from ..rve.microstructure import Microstructure
 from . import resources
 from .backends import Backend, PreparedSystem
-from .choice import DEFAULT_SOLVER, solver_backend
+from .choice import Solver, as_solver
 from .result import ConvergenceError, FloatingClusters, HomogenizationResult
 
 __all__ = ["homogenize", "check_solver_args", "check_x0", "as_problem", "SolveRecord",
@@ -52,9 +53,10 @@ def check_solver_args(ms: Microstructure, mat: Materials, tol: float, maxiter: i
     if not isinstance(ms, Microstructure):
         raise ValueError(f"ms: expected a Microstructure, got {type(ms).__name__}")
     if not isinstance(mat, Materials):
-        raise ValueError(f"mat: expected a Materials object, got {type(mat).__name__}")
+        raise ValueError(f"materials: expected a Materials object, got "
+                         f"{type(mat).__name__}")
     if ms.names[0] != mat.matrix:
-        raise ValueError(f"mat: matrix phase {mat.matrix!r} differs from the microstructure's "
+        raise ValueError(f"materials: matrix phase {mat.matrix!r} differs from the microstructure's "
                          f"matrix {ms.names[0]!r}")
     try:
         tol = float(tol)
@@ -218,27 +220,60 @@ def build_result(ms: Microstructure, g: Any, records: list[SolveRecord], *,
     return result
 
 
-def homogenize(problem: Microstructure | DiscreteProblem, mat: Materials, *,
-               backend: str | Backend = DEFAULT_SOLVER, tol: float = 1e-8,
+def _solver_backend(solver: Solver | str | Backend | None) -> Backend:
+    """The backend object of ``solver``: a configured Backend as it is, else the Solver's
+    (a name resolved by :func:`~itr_fv.solvers.choice.as_solver`). A grid goes where it
+    is asked to: sending a GPU's small grids to the CPU is the plan's decision
+    (:meth:`~itr_fv.solvers.choice.Solver.for_grid`), made by the callers that plan."""
+    if isinstance(solver, Backend):
+        return solver
+    return as_solver(solver, "solver").backend()
+
+
+def _solve_cases(prepared: PreparedSystem, g: Any, ms: Microstructure, dirs: tuple[int, ...],
+                 x0: np.ndarray | None, tol: float, maxiter: int,
+                 callback: Callback | None
+                 ) -> tuple[list[SolveRecord], list[tuple[Any, Any]]]:
+    """Solve the load cases E = e_d of ``dirs`` together on a prepared system; one record
+    each (a case solved on its own keeps its time; cases solved together share theirs by
+    their iterations); with each case's (restarts, replacements)."""
+    t1 = time.perf_counter()
+    loads = [load_vector(g, ms.voxel_m, _unit_load(d)) for d in dirs]
+    step = None if callback is None else (lambda c, it, res: callback(dirs[c], it, res))
+    sols = prepared.solve_block(loads, [None if x0 is None else x0[c]
+                                        for c in range(len(dirs))], tol, maxiter, step)
+    del loads
+    seconds = time.perf_counter() - t1
+    total = max(sum(sol.iterations for sol in sols), 1)
+    return [SolveRecord(d, sol.x, sol.iterations, sol.history, sol.residual,
+                        sol.seconds if sol.seconds is not None else
+                        seconds * max(sol.iterations, 1) / total
+                        if len(sols) > 1 else seconds)
+            for d, sol in zip(dirs, sols)], [(sol.restarts, sol.replacements) for sol in sols]
+
+
+def homogenize(problem: Microstructure | DiscreteProblem, materials: Materials, *,
+               solver: Solver | str | Backend | None = None, tol: float = 1e-8,
                maxiter: int | None = None, directions: Sequence[int] = (0, 1, 2),
                x0: np.ndarray | None = None, callback: Callback | None = None,
                strict: bool = True, store_fields: bool = True, check_memory: bool = True,
                staircase: bool = True, geometry: FaceGeometry | None = None
                ) -> HomogenizationResult:
-    """Effective conductivity tensor of one discrete problem by a chosen backend.
+    """Effective conductivity tensor of a microstructure or discrete problem: the package's
+    one door to a solve, for every solver.
 
     Parameters
     ----------
     problem : DiscreteProblem or Microstructure
         The problem (geometry built once, reused for many parameter sets), or a voxel
-        image whose problem is built here under the contact model of ``mat``.
-    mat : Materials
+        image whose problem is built here under the contact model of ``materials``.
+    materials : Materials
         Conductivities (W/(m K)) and interface resistances (m^2 K/W).
-    backend : str or Backend
-        A solver choice of :mod:`itr_fv.solvers.choice` (``"fft"``, the default, ``"mg"``,
-        ``"fv"``, ``"gpu"``, ``"auto"``), a registered backend name
-        (:func:`itr_fv.solvers.backends.available_backends`: ``"itr_fv"`` pyamg, ``"itr_fft"``
-        numba FFT-PCG, ``"array_api"``, ``"scipy_fft"``) or a configured backend object
+    solver : Solver, str or Backend, optional
+        A :class:`~itr_fv.solvers.choice.Solver` (:func:`~itr_fv.solvers.choice.resolve_solver`:
+        a method, its options and its device), a name (``"fft"``, the default, ``"mg"``,
+        ``"fv"`` the pyamg reference, ``"gpu"``, ``"auto"``, or a registered backend such
+        as ``"scipy_fft"``), or a configured backend object
         (:func:`itr_fv.solvers.backends.backend_for`).
     tol : float
         Relative residual ||b - A theta|| / ||b|| to reach, in (0, 1), checked on the true
@@ -257,12 +292,12 @@ def homogenize(problem: Microstructure | DiscreteProblem, mat: Materials, *,
     store_fields : bool
         Keep temperature, theta and face fluxes in the result.
     check_memory : bool
-        Refuse (:class:`~itr_fv.solvers.resources.InsufficientMemoryError`) a solve whose estimated
-        peak exceeds the available memory, before any work.
+        Refuse (:class:`~itr_fv.solvers.resources.InsufficientMemoryError`) a solve whose
+        estimated peak exceeds the available memory, before any work.
     staircase, geometry
         How to build the problem from a Microstructure (staircase correction of interface
-        resistances; a precomputed :class:`~itr_fv.discrete.model.FaceGeometry`); not allowed with a
-        DiscreteProblem's own geometry.
+        resistances; a precomputed :class:`~itr_fv.discrete.model.FaceGeometry`); not allowed
+        with a DiscreteProblem's own geometry.
 
     Returns
     -------
@@ -274,49 +309,36 @@ def homogenize(problem: Microstructure | DiscreteProblem, mat: Materials, *,
     t0 = time.perf_counter()
     given = problem if isinstance(problem, DiscreteProblem) else None
     ms = given.microstructure if given is not None else problem
-    solver = (backend if isinstance(backend, Backend)
-              else solver_backend(backend, argument="backend"))
-    tol, maxiter, dirs = check_solver_args(ms, mat, tol, maxiter, directions, callback,
-                                           solver.default_maxiter)
-    solver.check(ms.shape, tol)
+    if not isinstance(ms, Microstructure):
+        raise ValueError(f"problem: expected a Microstructure or a DiscreteProblem, got "
+                         f"{type(problem).__name__}")
+    backend = _solver_backend(solver)
+    tol, maxiter, dirs = check_solver_args(ms, materials, tol, maxiter, directions, callback,
+                                           backend.default_maxiter)
+    backend.check(ms.shape, tol)
     x0 = check_x0(x0, ms.shape, dirs)
     if check_memory:
-        resources.check_memory(ms.shape, solver, store_fields=store_fields,
+        resources.check_memory(ms.shape, backend, store_fields=store_fields,
                                load_cases=len(dirs))
-    problem = as_problem(given or ms, mat, staircase, geometry)
-    where = solver.array_namespace()
-    system = (problem.system(mat) if where is None
-              else problem.system(mat, xp=where[0], device=where[1]))
-    prepared = solver.prepare(system, ms.voxel_m)
+    problem = as_problem(given or ms, materials, staircase, geometry)
+    where = backend.array_namespace()
+    system = (problem.system(materials) if where is None
+              else problem.system(materials, xp=where[0], device=where[1]))
+    prepared = backend.prepare(system, ms.voxel_m)
     try:
         g, clusters = device_arrays(prepared, system)
         setup = time.perf_counter() - t0
-        t1 = time.perf_counter()
-        loads = [load_vector(g, ms.voxel_m, _unit_load(d)) for d in dirs]
-        step = None if callback is None else (lambda c, it, res: callback(dirs[c], it, res))
-        sols = prepared.solve_block(loads, [None if x0 is None else x0[c]
-                                            for c in range(len(dirs))], tol, maxiter, step)
-        del loads
-        seconds = time.perf_counter() - t1
-        total = max(sum(sol.iterations for sol in sols), 1)
-        # a case solved on its own keeps its time; cases solved together share theirs by
-        # their iterations
-        records = [SolveRecord(d, sol.x, sol.iterations, sol.history, sol.residual,
-                               sol.seconds if sol.seconds is not None else
-                               seconds * max(sol.iterations, 1) / total
-                               if len(sols) > 1 else seconds)
-                   for d, sol in zip(dirs, sols)]
-        restarts = [sol.restarts for sol in sols]
+        records, counts = _solve_cases(prepared, g, ms, dirs, x0, tol, maxiter, callback)
         geometry = problem.geometry
-        info = {**prepared.info, "restarts": restarts,
-                "replacements": [sol.replacements for sol in sols],
+        info = {**prepared.info, "restarts": [c[0] for c in counts],
+                "replacements": [c[1] for c in counts],
                 "unknowns": int(math.prod(ms.shape)),
                 "interface_faces": geometry.n_interface_faces,
                 "contact_faces": geometry.n_contact_faces, "contact": problem.contact,
                 "staircase": geometry.staircase}
         return build_result(ms, g, records, clusters=clusters, floating=system.floating,
                             tol=tol, setup_time=setup, wall_time=time.perf_counter() - t0,
-                            solver=solver.name, store_fields=store_fields, strict=strict,
+                            solver=backend.name, store_fields=store_fields, strict=strict,
                             info=info, to_host=prepared.to_host)
     finally:
         prepared.close()

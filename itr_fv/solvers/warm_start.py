@@ -45,7 +45,7 @@ def galerkin_start(geometry: FaceGeometry, mat: Materials,
     Returns
     -------
     ndarray, shape (len(directions), n1, n2, n3)
-        Pass as ``x0`` to ``itr_fv.homogenize`` or ``itr_fft.homogenize``.
+        Pass as ``x0`` to ``itr_fv.homogenize``.
     """
     if not isinstance(geometry, FaceGeometry):
         raise ValueError("geometry: expected a FaceGeometry (itr_fv.discrete.model.face_geometry)")
