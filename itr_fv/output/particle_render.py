@@ -15,6 +15,25 @@ __all__ = ["render_particles"]
 _SUBSCRIPTS = str.maketrans("0123456789", "".join(chr(0x2080 + i) for i in range(10)))
 
 
+def _with_periodic_images(c: np.ndarray, r: np.ndarray, mats: np.ndarray,
+                          box_um: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Centres (um), radii (um) and phases of the spheres with the periodic images of those
+    that reach into the box from its 26 neighbours."""
+    cs, rs, ms_ = [c], [r], [mats]
+    for sx in (-1, 0, 1):
+        for sy in (-1, 0, 1):
+            for sz in (-1, 0, 1):
+                if sx == sy == sz == 0:
+                    continue
+                moved = c + np.array([sx, sy, sz]) * box_um
+                # keep images that reach into the box
+                keep = np.all((moved + r[:, None] > 0) & (moved - r[:, None] < box_um), axis=1)
+                cs.append(moved[keep])
+                rs.append(r[keep])
+                ms_.append(mats[keep])
+    return np.concatenate(cs), np.concatenate(rs), np.concatenate(ms_)
+
+
 def render_particles(ms: Microstructure, path: str, colors: Mapping[str, str] | None = None,
                      window_size: tuple[int, int] = (900, 900), resolution: int = 16,
                      periodic_images: bool = True, show_box: bool = True,
@@ -68,22 +87,7 @@ def render_particles(ms: Microstructure, path: str, colors: Mapping[str, str] | 
         cmap.update(colors)
 
     if periodic_images:
-        cs, rs, ms_ = [c], [r], [mats]
-        for sx in (-1, 0, 1):
-            for sy in (-1, 0, 1):
-                for sz in (-1, 0, 1):
-                    if sx == sy == sz == 0:
-                        continue
-                    shift = np.array([sx, sy, sz]) * box_um
-                    moved = c + shift
-                    # keep images that reach into the box
-                    lo = moved - r[:, None]
-                    hi = moved + r[:, None]
-                    keep = np.all((hi > 0) & (lo < box_um), axis=1)
-                    cs.append(moved[keep])
-                    rs.append(r[keep])
-                    ms_.append(mats[keep])
-        c, r, mats = np.concatenate(cs), np.concatenate(rs), np.concatenate(ms_)
+        c, r, mats = _with_periodic_images(c, r, mats, box_um)
 
     pl = offscreen_plotter(window_size=list(window_size))
     pl.set_background("white")
