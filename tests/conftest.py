@@ -44,3 +44,18 @@ def random_spheres(n: int, fraction: float, seed: int, box_m: float = 1.0,
 @pytest.fixture
 def tmp_out(tmp_path):
     return tmp_path
+
+
+def fast_few(values, *fast):
+    """Parameter values of a sweep in two tiers: those named in `fast` run in the default
+    (fast) tier, every other one is marked `slow` (run by .ci/run after the fast tier). A
+    value may be a tuple of several arguments; it is named by its first."""
+    def tier(v):
+        key = v[0] if isinstance(v, tuple) else v
+        if key in fast:
+            return v
+        return pytest.param(*(v if isinstance(v, tuple) else (v,)), marks=pytest.mark.slow)
+    unknown = set(fast) - {v[0] if isinstance(v, tuple) else v for v in values}
+    if unknown:
+        raise ValueError(f"fast: {sorted(unknown)} not among the values")
+    return [tier(v) for v in values]

@@ -14,6 +14,7 @@ import importlib.util
 
 import numpy as np
 import pytest
+from conftest import fast_few
 from refusals import refuses
 
 from itr_fft.array_api_backend import ArrayAPIOps, _cuda_available, _Operator
@@ -87,7 +88,7 @@ def test_face_stencil_is_the_operator_of_the_backend(namespace):
 
 @pytest.mark.parametrize("cycle", ["V", "W"])
 @pytest.mark.parametrize("namespace", NAMESPACES)
-@pytest.mark.parametrize("case,n", CASES)
+@pytest.mark.parametrize("case,n", fast_few(CASES, "sc_R5e-5"))
 def test_cycle_equals_the_numba_multigrid(case, n, namespace, cycle):
     xp = _xp(namespace)
     _, system = _system(case, n)
@@ -115,7 +116,7 @@ def test_plain_boxes_without_particle_ids(namespace):
 
 
 @pytest.mark.parametrize("namespace", NAMESPACES)
-@pytest.mark.parametrize("case,n", CASES)
+@pytest.mark.parametrize("case,n", fast_few(CASES, "sc_R5e-5"))
 def test_deflation_equals_the_particle_deflation(case, n, namespace):
     xp = _xp(namespace)
     _, system = _system(case, n)
@@ -141,7 +142,7 @@ def _numba_solve(system, b: np.ndarray, voxel_m: float, tol: float):
 
 
 @pytest.mark.parametrize("namespace", NAMESPACES)
-@pytest.mark.parametrize("case,n", CASES)
+@pytest.mark.parametrize("case,n", fast_few(CASES, "sc_R5e-5"))
 def test_cg_takes_the_numba_backends_iterations(case, n, namespace):
     """The float32 hierarchy (as the numba backend's), float64 CG vectors, tol 1e-8."""
     xp = _xp(namespace)

@@ -4,9 +4,12 @@ command rows said skipped, the report written (a lent device runs the same scrip
 
 import json
 
+import pytest
+
 from validation.bench_device import GOALS, main
 
 
+@pytest.mark.slow
 def test_the_device_script_runs_without_a_device_and_says_what_is_unverified(tmp_path, capsys):
     assert main(["--n", "32", "--budget-s", "300", "--out", str(tmp_path)]) == 0
     res = json.loads((tmp_path / "bench_device.json").read_text())

@@ -61,6 +61,7 @@ def reference(tmp_path_factory):
     return d, out
 
 
+@pytest.mark.slow
 def test_sigkill_part_way_then_resume_equals_an_uninterrupted_run(reference):
     d, expected = reference
     env = dict(os.environ, PYTHONWARNINGS="ignore")

@@ -68,6 +68,7 @@ def test_bad_invocations_are_one_line_with_status_and_leave_nothing(args, status
     assert sorted(p.name for p in tmp_path.iterdir()) == before  # no output folder left
 
 
+@pytest.mark.slow
 def test_runtime_failures_are_one_line_status_1_and_remove_the_new_folder(tmp_path):
     # 0.672 passes the up-front check (below the jamming estimate) but the packer gives up
     r = run_itr("demo", "--fraction", "0.672", "--out", "packing", cwd=tmp_path)

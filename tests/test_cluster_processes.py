@@ -188,6 +188,7 @@ def test_a_campaign_on_workers_in_another_directory_writes_into_the_clients_fold
     assert code == 0 and "all 4 tasks are done; nothing to solve" in out
 
 
+@pytest.mark.slow
 def test_itr_identify_on_workers_in_another_directory_keeps_every_solve_on_the_client(
         cluster, tmp_path, monkeypatch, capsys):
     """``itr identify --scheduler`` with a relative ``--out``: every full solve the engine
@@ -295,6 +296,7 @@ MANY = TINY.read_text().replace("replicas = 2", "replicas = 4") \
     .replace("block_size = 3", "block_size = 1").replace('name = "tiny"', 'name = "many"')
 
 
+@pytest.mark.slow
 def test_a_worker_killed_mid_run_loses_no_result(tmp_path):
     base = tmp_path
     dirs = {name: base / name for name in ("logs", "scheduler", "w0", "w1", "client")}

@@ -158,6 +158,7 @@ def _noise_only(tables, seed):
     return Measurements(values, f"noise only {seed}")
 
 
+@pytest.mark.slow
 def test_the_verdict_is_frozen_and_the_tables_are_left_as_they_were(tables):
     before = dict(tables.effect_corrections), dict(tables.corrections)
     d = find_discrepancy(_noise_only(tables, 0), settings=SETTINGS, tables=tables)

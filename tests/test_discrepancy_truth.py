@@ -18,6 +18,9 @@ from pathlib import Path
 
 import pytest
 
+# the slow tier (.ci/run runs it after the fast tier): the truth study at its CI size
+pytestmark = pytest.mark.slow
+
 ROOT = Path(__file__).resolve().parents[1]
 
 

@@ -21,6 +21,10 @@ from itr_identify.reporting.naming_words import (
     verdict_sentence,
 )
 
+# the slow tier (.ci/run runs it after the fast tier): an identification and its effects' tables;
+# the fast tier runs the discrepancy workflow in test_discrepancy.py
+pytestmark = pytest.mark.slow
+
 SMALL = ForwardSettings(RVESpec(box_um=12.0, voxel_um=0.5, seed=3), replicas=2)
 FORMS = ("Al2O3-55", "Al2O3-60", "AlN-55", "AlN-60", "Al2O3-30-AlN-30")
 QUICK = NamingSettings(steps=400, burn=200, evidence_draws=20_000)

@@ -6,6 +6,7 @@ import functools
 
 import numpy as np
 import pytest
+from conftest import fast_few
 from refusals import refuses
 
 import itr_fv
@@ -45,7 +46,7 @@ def _common_case(name: str, contact: str):
 
 
 @pytest.mark.parametrize("contact", ["area", "gap", "gap+spots"])
-@pytest.mark.parametrize("name", CASES)
+@pytest.mark.parametrize("name", fast_few(CASES, "al2o3_60"))
 def test_fft_matches_fv_on_common_set(name, contact, fft_solve):
     """The FFT backends give the FV tensor to <= 1e-6 under every contact model (CI size)."""
     problem, mat, fv = _common_case(name, contact)

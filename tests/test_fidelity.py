@@ -74,6 +74,7 @@ def corrected():
     return identify(meas, "gap", settings=settings, grid_points=41, echo=lambda _: None), quick
 
 
+@pytest.mark.slow
 def test_correction_makes_the_model_the_faithful_estimate_at_its_point(corrected):
     ident, _ = corrected
     for f, m in ident.models.items():
@@ -91,6 +92,7 @@ def test_correction_makes_the_model_the_faithful_estimate_at_its_point(corrected
         assert 0 < c.relative_sd < 0.1
 
 
+@pytest.mark.slow
 def test_corrections_repeat_until_the_best_point_stops_moving(corrected):
     ident, quick = corrected
     rounds = ident.fidelity_rounds
@@ -104,6 +106,7 @@ def test_corrections_repeat_until_the_best_point_stops_moving(corrected):
         assert b["at"] == a["best"]
 
 
+@pytest.mark.slow
 def test_error_budget_gives_every_source_and_its_effect_on_the_resistance(corrected):
     ident, _ = corrected
     b = error_budget(ident)

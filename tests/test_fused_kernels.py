@@ -204,11 +204,13 @@ def simulated() -> dict[str, Any]:
     return json.loads(proc.stdout.strip().splitlines()[-1])
 
 
+@pytest.mark.slow
 def test_simulator_is_available(simulated):
     assert simulated["available"] is True
 
 
 @pytest.mark.parametrize("case", ["5x6x7_float64", "8x8x8_float64", "8x8x8_default_launch"])
+@pytest.mark.slow
 def test_operator_matches_model_and_array_api(simulated, case):
     got = simulated["operator"][case]
     assert got["model"] < 1e-12
@@ -218,6 +220,7 @@ def test_operator_matches_model_and_array_api(simulated, case):
     assert got["same_dtype"] == 1.0
 
 
+@pytest.mark.slow
 def test_operator_float32_sums_like_array_api(simulated):
     got = simulated["operator"]["5x6x7_float32"]
     assert got["same_dtype"] == 1.0
@@ -225,12 +228,14 @@ def test_operator_float32_sums_like_array_api(simulated):
     assert got["model"] < 1e-5  # float32 against the float64 model
 
 
+@pytest.mark.slow
 def test_block_equals_three_single_applications(simulated):
     assert simulated["block"]["single"] == 0.0
     assert simulated["block"]["model"] < 1e-12
 
 
 @pytest.mark.parametrize("dtype, tol", [("float64", 1e-12), ("float32", 1e-6)])
+@pytest.mark.slow
 def test_fused_updates_equal_numpy_expressions(simulated, dtype, tol):
     got = simulated["update"][dtype]
     for key in ("x", "r", "p", "residual", "residual_norm"):  # residual: against float64
@@ -239,6 +244,7 @@ def test_fused_updates_equal_numpy_expressions(simulated, dtype, tol):
         assert got[key] < 1e-12, key
 
 
+@pytest.mark.slow
 def test_cg_with_fused_kernels_matches_array_api_cg(simulated):
     got = simulated["cg"]
     assert got["iterations_fused"] == got["iterations_api"]
@@ -249,6 +255,7 @@ def test_cg_with_fused_kernels_matches_array_api_cg(simulated):
 
 
 @pytest.mark.parametrize("case", BLOCK_CASES)
+@pytest.mark.slow
 def test_block_cg_with_the_fused_block_kernel_equals_single_solves(simulated, case):
     got = simulated["block_cg"]
     assert got[f"{case}_same_iterations"] == 1.0

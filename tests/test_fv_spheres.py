@@ -6,6 +6,10 @@ from conftest import random_spheres, sc_sphere
 
 from itr_fv import Materials, homogenize
 
+# the slow tier (.ci/run runs it after the fast tier): 64^3 sphere arrays; the fast tier checks the
+# finite-volume solver on exact cases in test_fv_exact.py
+pytestmark = pytest.mark.slow
+
 # Rayleigh multipole values for the simple-cubic array, f = 0.3, k_p/k_m = 10
 SC_PERFECT = 1.88774
 SC_ALPHA_05 = 1.17292

@@ -111,6 +111,7 @@ def test_screening_finds_the_resistance_of_exact_data(models):
     assert np.all(np.diff(d) >= 0) and c[-1] == 1.0
 
 
+@pytest.mark.slow
 def test_synthetic_recovery_inside_the_90_percent_interval(models, table3):
     """Acceptance 1, small version: the true resistance inside the 90 % credible interval
     for at least 9 of 10 seeds (each seed: its own sample microstructure and noise)."""
@@ -133,6 +134,7 @@ def test_posterior_narrows_with_more_precise_data(models, truth, table3):
     assert n[1] - n[0] <= w[1] - w[0]
 
 
+@pytest.mark.slow
 def test_area_parametrisation_reports_what_the_data_cannot_separate(table3):
     """Two parameters (R_fp, Rff) from three Al2O3 fractions: the posterior is a ridge of
     negatively correlated log values (a higher matrix resistance is made up by a lower

@@ -88,6 +88,7 @@ def test_bad_invocations_fail_in_one_line(tmp_path, capsys, args, expected):
     assert expected in err
 
 
+@pytest.mark.slow
 def test_reproduce_end_to_end_at_tiny_size(tmp_path):
     """Every stage of the pipeline on the shipped Table 3: RVEs of all 12 formulations,
     reduced bases, calibration, screening, full-solver validation, leave-one-out, figures,
@@ -203,6 +204,7 @@ def test_reproduce_end_to_end_at_tiny_size(tmp_path):
     assert "snapshot fields removed" in manifest["inputs"]["store_fields"]
 
 
+@pytest.mark.slow
 def test_identify_with_an_effect_writes_it_beside_the_base(tmp_path, capsys):
     """``--effect tester``: the identification with the tester's contact beside the base
     model, in the report, identified.json and a residual figure (the verdict over the

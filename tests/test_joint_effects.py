@@ -251,6 +251,7 @@ def _fraction_effect():
     return e
 
 
+@pytest.mark.slow
 def test_a_fraction_loss_in_simulated_tables_is_named_and_nothing_on_noise():
     """Inside the model (the machinery's check, not a power study): tables simulated with
     the stand-in and a fraction factor of 0.9 name the fraction loss with the truth inside

@@ -18,6 +18,10 @@ from itr_identify.inference.measurements import Measurements, read_measurements
 from itr_identify.inference.pipeline import identify
 from itr_identify.reporting.headline import DETERMINED_FACTOR, parameter_flag
 
+# the slow tier (.ci/run runs it after the fast tier): an identification on five formulations;
+# the fast tier identifies in test_identify_cli.py and test_identify.py
+pytestmark = pytest.mark.slow
+
 SMALL = ForwardSettings(RVESpec(box_um=12.0, voxel_um=0.5, seed=3), replicas=2)
 FORMS = ("Al2O3-55", "Al2O3-60", "AlN-55", "AlN-60", "Al2O3-30-AlN-30")
 

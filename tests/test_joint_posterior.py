@@ -157,6 +157,7 @@ def _simulated_likelihood(r_al2o3: float, *, seed: int) -> JointLikelihood:
     return JointLikelihood(tables, _simulate(blank, truth, seed=seed), space, scatter=SCATTER)
 
 
+@pytest.mark.slow
 def test_the_sampler_recovers_the_truth_and_is_seeded():
     lik = _simulated_likelihood(2.2e-8, seed=3)
     post = sample(lik, seed=7)

@@ -82,6 +82,7 @@ def test_without_a_misfit_the_term_stays_small_and_the_resistance_is_recovered()
     assert fit.amplitude[1] <= fit.amplitude[0] <= fit.amplitude[2]
 
 
+@pytest.mark.slow
 def test_a_misfit_steepening_with_the_fraction_is_covered_only_with_the_term():
     # the measurements steepen above the model towards the packing limit (as Table 3 does):
     # +0 % at 45 vol%, +17 % at 65 vol%, on top of replicate noise

@@ -61,6 +61,7 @@ def test_a_corrections_table_holds_for_the_system_it_was_built_for():
         default_system(), CHEAP_RVE)
 
 
+@pytest.mark.slow
 def test_identify_runs_on_another_system_and_reports_it(tmp_path, capsys):
     """ZnO in epoxy, two formulations (one by mass), a coarse RVE: the plan names the
     system and its RVEs, the identified resistance is R_ZnO_epoxy, the report and

@@ -101,6 +101,7 @@ def serial_reproduce(tmp_path_factory):
     return out, _strip(json.loads((out / "identified.json").read_text()))
 
 
+@pytest.mark.slow
 def test_reproduce_killed_part_way_redoes_no_finished_solve(serial_reproduce, tmp_path,
                                                             capsys):
     ref_out, ref = serial_reproduce
@@ -117,6 +118,7 @@ def test_reproduce_killed_part_way_redoes_no_finished_solve(serial_reproduce, tm
     assert_close(_strip(json.loads((out / "identified.json").read_text())), ref)
 
 
+@pytest.mark.slow
 def test_reproduce_geometry_is_built_once_per_rve(serial_reproduce):
     out, _ = serial_reproduce
     manifest = json.loads((out / "manifest.json").read_text())

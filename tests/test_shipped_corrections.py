@@ -188,6 +188,7 @@ def tiny_run(tmp_path_factory):
     return plan, out
 
 
+@pytest.mark.slow
 def test_the_assembled_factor_is_the_table_mean_to_converged_box_without_bias(tiny_run):
     plan, out = tiny_run
     data = ct.assemble(plan, out)
@@ -319,6 +320,7 @@ def test_the_shipped_table_is_what_the_committed_parts_give():
     assert ship_corrections._stable(fresh) == ship_corrections._stable(shipped)
 
 
+@pytest.mark.slow
 def test_one_shipped_point_regenerated_by_solves_matches(tmp_path):
     """The CI-size regeneration: Al2O3-55 at R = 5e-8 from the shipped plan (its table
     packings, 32 um at 0.25 um, and the three cheap replicas) solved here gives the shipped
@@ -343,6 +345,7 @@ def test_one_shipped_point_regenerated_by_solves_matches(tmp_path):
     assert c == pytest.approx(shipped["c"], rel=2e-5)
 
 
+@pytest.mark.slow
 def test_default_identification_applies_the_shipped_corrections_with_their_terms():
     """The default fidelity on Table 3's Al2O3 formulations: every model carries the shipped
     correction (no faithful solve at runtime) and its system's shared term, the error budget

@@ -133,6 +133,7 @@ def test_demo_solves_with_the_chosen_solver(tmp_path, capsys):
                                                                       rtol=1e-6)
 
 
+@pytest.mark.slow
 def test_reproduce_on_the_device_equals_the_cpu_run(gpus, monkeypatch, tmp_path):
     """``itr reproduce --device cuda`` end to end with a stand-in for the device: the device
     check sees one GPU and the ``gpu`` choice's backend is the array-API backend on NumPy
