@@ -5,6 +5,7 @@ import warnings
 
 import numpy as np
 import pytest
+from refusals import refuses
 from scipy.spatial import cKDTree
 
 from itr_fv.rve import FillerSpec, RVESpec, generate_rve, generate_rve_with_report, packing_limit
@@ -175,56 +176,56 @@ def test_fillerspec_validation():
     for f in (0.0, 1.0, -0.1, 1.5):
         with pytest.raises(ValueError, match="volume_fraction"):
             FillerSpec("Al2O3", 1.0, 0.3, f)
-    with pytest.raises(ValueError, match="material"):
+    with refuses(ValueError, "material"):
         FillerSpec("", 1.0, 0.3, 0.5)
-    with pytest.raises(ValueError, match="material"):
+    with refuses(ValueError, "material"):
         FillerSpec(None, 1.0, 0.3, 0.5)
     with pytest.raises(ValueError, match="d_min_um"):
         FillerSpec("Al2O3", 1.0, 0.3, 0.5, d_min_um=0.0)
     with pytest.raises(ValueError, match="d_max_um"):
         FillerSpec("Al2O3", 1.0, 0.3, 0.5, d_max_um=-3.0)
-    with pytest.raises(ValueError, match="material"):
+    with refuses(ValueError, "material"):
         FillerSpec.from_table1("BN", 0.3)
 
 
 def test_generate_rve_bad_input():
     ok = FillerSpec("Al2O3", volume_fraction=0.3, **SMALL)
-    with pytest.raises(ValueError, match="box_um"):
+    with refuses(ValueError, "box_um"):
         RVESpec(0.0, 0.1)
-    with pytest.raises(ValueError, match="box_um"):
+    with refuses(ValueError, "box_um"):
         RVESpec(-8.0, 0.1)
-    with pytest.raises(ValueError, match="voxel_um"):
+    with refuses(ValueError, "voxel_um"):
         RVESpec(8.0, 0.0)
-    with pytest.raises(ValueError, match="voxel_um"):
+    with refuses(ValueError, "box_um/voxel_um"):
         RVESpec(8.0, 0.3)  # 8 / 0.3 not an integer
     # voxel larger than the particles that matter (D ~ 1 um, 2-voxel minimum = 1 um)
-    with pytest.raises(ValueError, match="voxel_um"):
+    with refuses(ValueError, "voxel_um"):
         generate_rve(RVESpec(8.0, 0.5, max_diameter_box_ratio=1 / 3), ok, 0)
-    with pytest.raises(ValueError, match="voxel_um"):
+    with refuses(ValueError, "voxel_um"):
         generate_rve(RVESpec(40.0, 2.0, max_diameter_box_ratio=1 / 3),
                      FillerSpec.from_table1("Al2O3", 0.5), 0)
-    with pytest.raises(ValueError, match="min_gap_um"):
+    with refuses(ValueError, "min_gap_um"):
         RVESpec(8.0, 0.125, min_gap_um=-0.1)
-    with pytest.raises(ValueError, match="seed"):
+    with refuses(ValueError, "seed"):
         generate_rve(RVESpec(8.0, 0.125), ok, -1)
-    with pytest.raises(ValueError, match="sampling"):
+    with refuses(ValueError, "sampling"):
         RVESpec(8.0, 0.125, sampling="sobol")
-    with pytest.raises(ValueError, match="max_sweeps"):
+    with refuses(ValueError, "max_sweeps"):
         RVESpec(8.0, 0.125, max_sweeps=0)
-    with pytest.raises(ValueError, match="spec"):
+    with refuses(ValueError, "spec"):
         generate_rve(ok, RVESpec(8.0, 0.125), 0)
-    with pytest.raises(ValueError, match="fillers"):
+    with refuses(ValueError, "fillers"):
         generate_rve(RVESpec(8.0, 0.125), [], 0)
     # unknown material
-    with pytest.raises(ValueError, match="unknown material"):
+    with refuses(ValueError, "fillers"):
         generate_rve(RVESpec(8.0, 0.125), FillerSpec("BN", volume_fraction=0.3, **SMALL), 0,
                      materials={"silicone", "Al2O3"})
-    with pytest.raises(ValueError, match="matrix"):
+    with refuses(ValueError, "matrix"):
         generate_rve(RVESpec(8.0, 0.125), ok, 0, matrix="epoxy", materials={"silicone", "Al2O3"})
-    with pytest.raises(ValueError, match="fillers"):
+    with refuses(ValueError, "fillers"):
         generate_rve(RVESpec(8.0, 0.125), FillerSpec("silicone", volume_fraction=0.3, **SMALL), 0)
     # box too small for an explicit largest particle
-    with pytest.raises(ValueError, match="box_um"):
+    with refuses(ValueError, "box_um"):
         generate_rve(RVESpec(8.0, 0.125, max_diameter_box_ratio=1 / 3),
                      FillerSpec("Al2O3", volume_fraction=0.3, d_max_um=4.0, **SMALL), 0)
 
@@ -233,11 +234,11 @@ def test_beyond_jamming_limit_states_estimate():
     with pytest.raises(ValueError, match=r"fillers: .*0\.69 exceeds .*limit 0\.6[78]"):
         generate_rve(RVESpec(40.0, 0.3125, max_diameter_box_ratio=1 / 3),
                      FillerSpec.from_table1("Al2O3", 0.69), 0)
-    with pytest.raises(ValueError, match="fillers"), pytest.warns(UserWarning, match="AlN"):
+    with refuses(ValueError, "fillers"), pytest.warns(UserWarning, match="AlN"):
         generate_rve(RVESpec(40.0, 0.3125, max_diameter_box_ratio=1 / 3),
                      [FillerSpec.from_table1("Al2O3", 0.40), FillerSpec.from_table1("AlN", 0.35)],
                      0)
-    with pytest.raises(ValueError, match="fillers"):
+    with refuses(ValueError, "fillers"):
         generate_rve(RVESpec(8.0, 0.125, max_diameter_box_ratio=1 / 3),
                      [FillerSpec("A", volume_fraction=0.6, **SMALL),
                       FillerSpec("B", volume_fraction=0.5, **SMALL)], 0)
