@@ -60,7 +60,7 @@ def test_the_shipped_plan_reads_and_makes_its_campaigns():
     for s in plan.systems:
         assert s.formulations == tuple(TABLE2[s.name])
         table = camps[f"corrections-v2-{s.name}-table"]
-        assert table.solver == "gpu" and table.replicas == 3 and table.seed == 9101
+        assert table.solver.key == "gpu" and table.replicas == 3 and table.seed == 9101
         sets = table.parameter_sets(table.formulations[0])
         for p in s.parameters:   # at least 4 resistances from 5e-9 to 2e-7, all in one task
             values = sorted({x[p] for x in sets})
