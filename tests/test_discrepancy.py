@@ -109,6 +109,10 @@ def test_without_thicknesses_the_tester_candidate_is_fitted_at_the_assumed_thick
 
 
 @pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason="known defect, found when CI first ran the slow tier "
+                   "(issue 62; fails the same on a4ee0f4): the verdict is 'unexplained' but "
+                   "for another reason (candidates reach the threshold only at the end of "
+                   "their resistance grid), so the wording the test asks for is missing")
 def test_an_effect_outside_the_library_is_unexplained(tables):
     # a stiffer matrix *and* solid contacts: the library holds one effect at a time
     meas = measure(fx.MatrixConductivity(), 0.27, extra=[(fx.ContactSpots(), 1e-5)])
@@ -267,6 +271,9 @@ def test_discrepancy_bad_invocations_fail_in_one_line(tmp_path, capsys, args, ex
 
 
 @pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason="known defect, found when CI first ran the slow tier "
+                   "(issue 62): the noise-only table names 'filler fraction below nominal' "
+                   "(log Bayes factor 2.5 against the threshold 2.0) instead of none")
 def test_the_whole_library_names_three_effects():
     """The seven candidates of issue 13 at once: matrix conductivity, contact spots and the tester's
     contact resistance are each named; filler conductivity, porosity and the filler

@@ -137,6 +137,10 @@ def test_reproduce_geometry_is_built_once_per_rve(serial_reproduce):
 
 
 @pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason="known defect, found when CI first ran the slow tier "
+                   "(issue 62; fails the same on a4ee0f4): with --workers 2 the fit with the "
+                   "inputs free ($.gap.fit.free_inputs) differs from the serial run by up to "
+                   "1.2e-5 relative; everything else within 1e-8")
 def test_workers_and_an_external_scheduler_give_the_serial_numbers(serial_reproduce,
                                                                    tmp_path, capsys):
     _, ref = serial_reproduce
