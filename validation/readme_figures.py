@@ -158,10 +158,12 @@ def block(data: dict) -> str:
             f"{r['files_mb']:.0f} MB in {r['files']} files plus its solve store "
             f"`itr-reproduce/solves/` ({r['solves_mb']:.0f} MB: one small Parquet row per "
             f"full solve; the reduced bases' temperature fields are kept there only while the "
-            f"run lasts, or with `--keep-fields`, about 320 MB). The tests: "
+            f"run lasts, or with `--keep-fields`, about 320 MB). The tests (README command 2, "
+            "the fast tier; .ci/run then runs the rest, `pytest -m slow`): "
             + (f"{t['failed']} FAILED, " if t.get("failed") else "")
             + f"{t.get('passed', 0)} passed, {t.get('skipped', 0)} skipped in "
-            f"{t['wall_s'] / 60:.0f} min ({t['date']}). Written by "
+            f"{t['wall_s'] / 60:.1f} min{' ' + t['where'] if t.get('where') else ''} "
+            f"({t['date']}). Written by "
             "`validation/readme_figures.py` from `validation/results/readme_figures.json`.")
 
 
@@ -393,6 +395,8 @@ def main() -> None:
     p.add_argument("--tests-from", default=None, metavar="LOG",
                    help="take the test figures from a saved default test run (the log of "
                         "bash .ci/run) instead of running the tests")
+    p.add_argument("--tests-where", default=None,
+                   help="with --tests-from: where that run ran, in words")
     p.add_argument("--reproduce-from", default=None, metavar="LOG",
                    help="take the main job's wall time from a saved log of bash .ci/run "
                         "(README command 1) instead of running it")
@@ -411,7 +415,8 @@ def main() -> None:
         RESULTS.write_text(json.dumps(data, indent=2) + "\n")
     if a.tests_from:
         data["tests"] = {**tests_from_log(Path(a.tests_from)), "date": str(date.today()),
-                         "machine": _machine(), "source": str(a.tests_from)}
+                         "machine": _machine(), "source": str(a.tests_from),
+                         **({"where": a.tests_where} if a.tests_where else {})}
         RESULTS.write_text(json.dumps(data, indent=2) + "\n")
     if a.step in ("write", "all"):
         write(data)
