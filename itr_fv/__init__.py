@@ -6,6 +6,7 @@ Public API::
     from itr_fv import Materials, Microstructure, homogenize
     from itr_fv.rve import FillerSpec, generate_rve      # dense periodic packings
     from itr_fv import analytic                          # exact / reference formulas
+    from itr_fv import read_volume, PhaseTable, microstructure_from_image  # segmented volumes
 
 Subpackages, by job (each imports only those before it): ``materials`` (phases, interface
 resistances, parameter names, size distributions, the paper's tables), ``rve`` (RVE
@@ -21,7 +22,10 @@ before this layout still import, with a DeprecationWarning (:mod:`itr_fv._moved`
 from . import _moved
 from .checks import PhysicalScaleWarning
 from .materials.properties import Materials
+from .rve.from_image import microstructure_from_image
 from .rve.microstructure import Microstructure, ParticleTable
+from .rve.phase_table import PhaseTable
+from .rve.volume_files import LabelVolume, read_volume, write_volume
 from .solvers.choice import Solver, resolve_solver
 from .solvers.driver import homogenize
 from .solvers.resources import InsufficientMemoryError
@@ -29,7 +33,8 @@ from .solvers.result import ConvergenceError, HomogenizationResult
 
 __all__ = ["Materials", "Microstructure", "ParticleTable", "homogenize", "Solver", "resolve_solver",
            "HomogenizationResult", "ConvergenceError", "InsufficientMemoryError",
-           "PhysicalScaleWarning"]
+           "PhysicalScaleWarning", "LabelVolume", "read_volume", "write_volume", "PhaseTable",
+           "microstructure_from_image"]
 __version__ = "0.1.0"
 
 _moved.install()

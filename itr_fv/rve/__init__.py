@@ -12,10 +12,16 @@ Public API::
 
 Modules: ``spec`` (:class:`~itr_fv.rve.spec.RVESpec`), ``packing`` (sphere packing),
 ``generate`` (fillers, :func:`generate_rve`, :func:`generate_rve_with_report`,
-:func:`build_rve`), ``microstructure`` (voxel images) and ``sphere_geometry`` (analytic
-sphere geometry on the grid).
+:func:`build_rve`), ``microstructure`` (voxel images), ``sphere_geometry`` (analytic
+sphere geometry on the grid), and for segmented scans ``volume_files`` (label volumes read
+and written: TIFF, NumPy, VTK, raw), ``phase_table`` (label -> phase) and ``from_image``
+(particles labelled, the image's Microstructure and Materials)::
+
+    vol = read_volume("scan.tif", voxel_um=0.5)
+    ms = microstructure_from_image(vol, PhaseTable.parse(["0=matrix", "1=Al2O3"], "silicone"))
 """
 
+from .from_image import microstructure_from_image
 from .generate import (
     FillerReport,
     FillerSpec,
@@ -28,18 +34,25 @@ from .generate import (
     packing_limit,
     size_cut,
 )
+from .phase_table import PhaseTable
 from .spec import RVESpec
+from .volume_files import LabelVolume, read_volume, write_volume
 
 __all__ = [
     "FillerReport",
     "FillerSpec",
+    "LabelVolume",
     "PackedRVE",
+    "PhaseTable",
     "RVEReport",
     "RVESpec",
     "SizeCut",
     "build_rve",
     "generate_rve",
     "generate_rve_with_report",
+    "microstructure_from_image",
     "packing_limit",
+    "read_volume",
     "size_cut",
+    "write_volume",
 ]
