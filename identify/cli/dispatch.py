@@ -20,6 +20,7 @@ from . import (
     identify,
     materials,
     reproduce,
+    solve,
     surrogate,
 )
 from .core import CLIError, Parser, flagged
@@ -37,7 +38,7 @@ def build_parser() -> argparse.ArgumentParser:
                         version=f"itr {__version__} (Python {sys.version.split()[0]})")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=Parser)
     for command in (demo, campaign, corrections, surrogate, reproduce, identify, discrepancy,
-                    materials):
+                    materials, solve):
         command.add_parser(sub)
     return parser
 
