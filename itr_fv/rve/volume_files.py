@@ -153,7 +153,8 @@ def _voxel(stated: tuple[float | None, float | None, float | None] | None, how: 
             raise ValueError(f"voxel_um: expected a voxel edge > 0 (um), got {given!r}")
         if said and not math.isclose(v, said[0], rel_tol=SPACING_RTOL):
             raise ValueError(f"voxel_um: {v:g} um disagrees with the {said[0]:.6g} um the "
-                             f"file states ({how}); drop voxel_um or correct the file")
+                             f"file states ({how}); give the file's value or none, or "
+                             "correct the file")
         return v, "voxel_um, as the file states" if said else "voxel_um"
     if stated is not None and len(said) == 3:
         return float(said[0]), f"the file ({how})"
