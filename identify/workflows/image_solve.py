@@ -15,6 +15,7 @@ import json
 import math
 import os
 import time
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -214,7 +215,10 @@ def run_image_solve(job: ImageJob, out: Path, echo: Callable[[str], None] = prin
     ms = job.microstructure
     summary = image_summary(job)
     backend = job.solver.backend(voxels=math.prod(ms.shape))
-    res = homogenize(ms, job.materials, solver=backend, tol=job.tol)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        res = homogenize(ms, job.materials, solver=backend, tol=job.tol)
+    notes = _notes(caught, ms)
     for line in _tensor_lines(res, job.volume.axes) + _summary_lines(summary):
         echo(line)
     vti = res.to_vtk(out / "image.vti", vectors=True)
@@ -231,13 +235,34 @@ def run_image_solve(job: ImageJob, out: Path, echo: Callable[[str], None] = prin
         "conductivities_W_per_mK": job.materials.conductivity, "system": job.system,
         "solver": {"key": job.solver.key, "backend": res.solver, "device": job.solver.device,
                    "tol": job.tol},
-        "wall_time_s": time.perf_counter() - t0, "package_version": __version__}
+        "notes": notes, "wall_time_s": time.perf_counter() - t0,
+        "package_version": __version__}
     js = write_text(out / "result.json", json.dumps(record, indent=2, default=_plain) + "\n")
     files = [js, vti, png]
     manifest = write_manifest(out, files, {"volume": job.volume.path, "tol": job.tol,
                                            "solver": job.solver.key}, job="solve")
     echo(f"wrote {js}, {vti}, {png}, {manifest}")
     return files + [manifest]
+
+
+def _notes(caught: list, ms: Microstructure) -> list[str]:
+    """The solve's warnings, said once each (and on standard error): the per-area contact
+    resistance in the words of an image solve, every other as it came."""
+    from itr_fv.checks import VoxelContactWarning
+
+    notes = []
+    for w in caught:
+        if issubclass(w.category, VoxelContactWarning):
+            text = (f"contact: the per-area contact resistance acts on the voxel faces between "
+                    f"touching particles; their area, and so the value to give, belongs to "
+                    f"the voxel size ({ms.voxel_m * 1e6:.4g} um here)")
+            warnings.warn(text, UserWarning, stacklevel=3)
+        else:
+            text = str(w.message)
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+        if text not in notes:
+            notes.append(text)
+    return notes
 
 
 def _plain(value: object) -> object:
