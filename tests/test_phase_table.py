@@ -167,3 +167,56 @@ def test_image_materials_ask_for_the_pairs_the_image_has():
     assert "Al2O3-AlN=VALUE" in str(info.value)
     mat = image_materials(ms, k, {**r_fm, ("AlN", "Al2O3"): 5e-8})
     assert mat.contact == "area" and mat.resistance_between("AlN", "Al2O3") == 5e-8
+
+
+# ------------------------------------------------------------------ resistances, percolation
+def test_resistance_items_and_an_identified_json_of_itr_reproduce():
+    """PAIR=VALUE (matrix, flat names, phases holding '-') and the quoted values of a real
+    identified.json (issue 58's reproduce run: the headline quotes gap)."""
+    from pathlib import Path
+
+    from itr_fv.materials.resistance_sources import (
+        merge_resistances,
+        parse_resistance,
+        resistances_from_identified,
+    )
+    phases = ("silicone", "Al2O3", "Al2O3-nano")
+    assert parse_resistance("Al2O3-matrix=1e-8", phases, "silicone") == (
+        ("Al2O3", "silicone"), 1e-8)
+    assert parse_resistance("Al2O3-nano-Al2O3=2e-8", phases, "silicone") == (
+        ("Al2O3", "Al2O3-nano"), 2e-8)
+    assert parse_resistance("R_Al2O3_silicone=inf", phases, "silicone")[1] == math.inf
+    for bad in ("Al2O3-matrix", "Al2O3-SiC=1e-8", "matrix-matrix=1", "Al2O3-matrix=-1",
+                "Gc_Al2O3_Al2O3=1e-6"):
+        with refuses(ValueError, "resistance"):
+            parse_resistance(bad, phases, "silicone")
+    path = (Path(__file__).resolve().parents[1] / "validation" / "results" /
+            "reproduce_issue58" / "identified.json")
+    head = __import__("json").loads(path.read_text())["headline"]
+    values, par, skipped = resistances_from_identified(path)
+    assert par == head["quote"] == "gap" and skipped == []
+    assert values == {n: e["best"] for n, e in head["parameters"]["gap"].items()}
+    area, _, _ = resistances_from_identified(path, parametrisation="area")
+    assert set(area) == {"R_Al2O3_silicone", "R_AlN_silicone", "Rff_Al2O3_Al2O3",
+                         "Rff_AlN_AlN", "Rff_Al2O3_AlN"}
+    with refuses(ValueError, "resistances"):
+        resistances_from_identified(path, parametrisation="other")
+    merged = merge_resistances([("command line", {("silicone", "Al2O3"): 1.0}),
+                                ("identified", {("Al2O3", "silicone"): 2.0})])
+    assert merged == {("Al2O3", "silicone"): {"value": 1.0, "source": "command line",
+                                              "overridden": [{"source": "identified",
+                                                              "value": 2.0}]}}
+
+
+def test_percolation_of_a_rod_and_of_separate_balls():
+    """A rod of filler through the box along axis 0 spans that axis only; a ball cut by the
+    box's faces spans none (the image as a sample: its wrap is cut)."""
+    from itr_fv.discrete.percolation import spanning_clusters
+    table = PhaseTable.of({0: "matrix", 1: "Al2O3"}, "silicone")
+    rod = np.zeros((16, 16, 16), dtype=np.uint8)
+    rod[:, 6:9, 6:9] = 1
+    ms = microstructure_from_image(rod, table, voxel_um=1.0)
+    assert spanning_clusters(ms)["spans"] == [True, False, False]
+    ball = balls(16, [(0.0, 0.0, 0.0)], 5.0)
+    out = spanning_clusters(microstructure_from_image(ball, table, voxel_um=1.0))
+    assert out["spans"] == [False, False, False] and out["clusters"] == 8
