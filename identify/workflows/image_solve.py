@@ -234,6 +234,7 @@ def run_image_solve(job: ImageJob, out: Path, echo: Callable[[str], None] = prin
         "contact_model": "area (per-area resistance at faces between two particles)",
         "conductivities_W_per_mK": job.materials.conductivity, "system": job.system,
         "solver": {"key": job.solver.key, "backend": res.solver, "device": job.solver.device,
+                   "ran_on": job.solver.for_grid(math.prod(ms.shape)).device,
                    "tol": job.tol},
         "notes": notes, "wall_time_s": time.perf_counter() - t0,
         "package_version": __version__}
