@@ -39,7 +39,8 @@ def test_identify_writes_identified_json(tmp_path, capsys):
     assert "identify: done" in stdout
     # the last line names the folder and every file written, the report first
     assert stdout.splitlines()[-1].endswith(f"wrote {out}/: report.md, identified.json, "
-                                            "figure posterior_gap.png, manifest.json")
+                                            "posterior_gap.parquet, figure posterior_gap.png, "
+                                            "manifest.json")
     # the headline: on the terminal with interval and flag, at the top of the report, in json
     head = data["headline"]
     e = head["parameters"]["gap"]["R_Al2O3_silicone"]

@@ -16,9 +16,11 @@ from . import (
     campaign,
     corrections,
     demo,
+    design,
     discrepancy,
     identify,
     materials,
+    predict,
     reproduce,
     solve,
     surrogate,
@@ -38,7 +40,7 @@ def build_parser() -> argparse.ArgumentParser:
                         version=f"itr {__version__} (Python {sys.version.split()[0]})")
     sub = parser.add_subparsers(dest="command", required=True, parser_class=Parser)
     for command in (demo, campaign, corrections, surrogate, reproduce, identify, discrepancy,
-                    materials, solve):
+                    predict, design, materials, solve):
         command.add_parser(sub)
     return parser
 

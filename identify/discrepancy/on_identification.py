@@ -14,7 +14,7 @@ the others (leave-one-out) and the residuals before and after.
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -44,6 +44,10 @@ class EffectFit:
     residuals : dict
         Per formulation (measured mean, model k and the sd of a measured mean about it at
         the base's best point, the same at the effect's), W/(m K).
+    posterior, likelihood : JointPosterior, JointLikelihood
+        The identification with the effect: its draws and its likelihood (what ``itr
+        predict`` evaluates, :mod:`itr_identify.inference.predictive`; not in
+        :meth:`to_dict`).
     """
 
     base: ModelFit
@@ -51,6 +55,8 @@ class EffectFit:
     loo_base: list[dict]
     loo_effect: list[dict]
     residuals: dict[str, tuple[float, float, float, float, float]]
+    posterior: Any = field(default=None, repr=False, compare=False)
+    likelihood: Any = field(default=None, repr=False, compare=False)
 
     def loo_inside(self, which: str) -> tuple[int, int]:
         """(inside the 90 % predictive interval, formulations) of ``which`` ('base' or
@@ -99,10 +105,11 @@ def with_effect(ident, effect: JointEffect, *,
     each model sampled once, its fit, leave-one-out and best point read from that sample."""
     settings = settings or NamingSettings()
     off = ModelFormPrior(on=False)
-    fits, loos, best = {}, {}, {}
+    fits, loos, best, posts = {}, {}, {}, {}
     for which, e in (("base", None), ("effect", effect)):
         lik = ident.likelihood(model_form=off, effect=e)
         fits[which], post = fit_and_posterior(lik, settings, effect=e)
+        posts[which] = (post, lik)
         loos[which] = leave_one_out_joint(post, lik, seed=settings.seed)
         best[which] = _best_point(lik, post)
     res = {}
@@ -110,7 +117,8 @@ def with_effect(ident, effect: JointEffect, *,
         mean = float(ident.measurements.mean(f))
         res[f] = (mean, best["base"][1][i], best["base"][2][i], best["effect"][1][i],
                   best["effect"][2][i])
-    return EffectFit(fits["base"], fits["effect"], loos["base"], loos["effect"], res)
+    return EffectFit(fits["base"], fits["effect"], loos["base"], loos["effect"], res,
+                     *posts["effect"])
 
 
 def _best_point(lik, post) -> tuple[list[str], list[float], list[float]]:

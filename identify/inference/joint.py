@@ -508,6 +508,41 @@ class JointLikelihood:
                 matrix_conductivity=matrix_conductivity,
                 inverse_thickness=_inverse_thickness(measurements, self.order))
 
+    @classmethod
+    def predictor(cls, tables: Mapping[str, Tabulated], space: JointSpace, *,
+                  scatter: Mapping[str, float],
+                  matrix_conductivity: float | None = None) -> JointLikelihood:
+        """The model of this likelihood for formulations without measurements (their
+        conductivities and model variance only: :meth:`predictive_of_model`; no
+        likelihood terms); a space with an effect binds it to ``tables`` (no sample
+        thicknesses: a tester's effect takes its assumed one)."""
+        self = cls.__new__(cls)
+        self.tables = dict(tables)
+        self.space = space
+        self.scatter = dict(scatter)
+        self.data = {f: (math.nan, 0.0, 1) for f in tables}
+        self.density, self.series, self.bound = {}, {}, None
+        self._prepare()
+        if space.effect is not None:
+            if matrix_conductivity is None:
+                raise ValueError("matrix_conductivity: an effect's terms need the matrix's "
+                                 "nominal conductivity, W/(m K)")
+            self.bound = space.effect.bind(
+                self.order, {f: t.fractions for f, t in self.tables.items()},
+                {f: t.parameters for f, t in self.tables.items()},
+                matrix_conductivity=matrix_conductivity)
+        return self
+
+    def predictive_of_model(self, cols: Mapping[str, np.ndarray]
+                            ) -> tuple[np.ndarray, np.ndarray]:
+        """(k, its variance without the measurement's), each (F, N) in :attr:`order`, at
+        the parameter ``cols``: the RVE scatter, the level's own sd, the error bound, an
+        effect's variance and the pooled packing sd, W/(m K) and (W/(m K))^2."""
+        k, err, extra = self._evaluate(cols)
+        v = (variance(0.0, k, err, self._scatter, self._model_sd) + extra * k ** 2
+             + (self._pack * k) ** 2)
+        return k, v
+
     def _prepare(self) -> None:
         tabs = list(self.tables.values())
         self.order = list(self.tables)

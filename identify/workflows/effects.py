@@ -13,6 +13,7 @@ from itr_surrogate.engine import SolveEngine
 from ..discrepancy.joint_effects import JOINT_EFFECTS
 from ..discrepancy.naming import NamingSettings
 from ..discrepancy.on_identification import effects_of, n_solves, name_on, with_effect
+from ..inference.predictive import record_of, write_record
 from ..reporting.figures import effect_residual_figure
 from ..reporting.naming_words import (
     candidate_lines,
@@ -60,6 +61,9 @@ def run_effects(ident, out: Path, *, engine: SolveEngine, verdict: bool,
         echo(f"discrepancy: the identification with {e.name} beside the base model")
         fit = with_effect(ident, e, settings=settings)
         record["effect_fit"] = fit.to_dict()
+        record["predictive"], draws = write_record(
+            record_of(ident, joint=fit.posterior, likelihood=fit.likelihood), out)
+        files.append(draws)
         fig = effect_residual_figure(fit, out / "effect_residuals.png")
         files.append(fig)
         record["headline"] = headline_entry(v, fit)

@@ -355,6 +355,7 @@ def _reproduce(settings: ReproduceSettings, out: Path, progress: bool,
     data = {"headline": head}
     data.update({p: {**report.identified_dict(i), "validation": validation[p],
                      "leave_one_out": lofo.get(p, [])} for p, i in idents.items()})
+    files += _predictive_records(idents, data, settings, out)
     data["selection"] = report.selection(idents)
     data["surrogate_check"] = figures.surrogate_check(validation, idents)
     data["psd_fit"] = psd_fits
@@ -503,11 +504,12 @@ def _identify_report(meas: Measurements, settings: ReproduceSettings, out: Path,
     head = headline(idents, discrepancy=extra[0].get("headline"))
     data = {"headline": head}
     data.update({p: report.identified_dict(i) for p, i in idents.items()})
+    records = _predictive_records(idents, data, settings, out)
     if extra[0]:
         data["discrepancy"] = extra[0]
     if len(idents) > 1:
         data["selection"] = report.selection(idents)
-    files = [write_text(out / "identified.json", json.dumps(data, indent=2) + "\n")]
+    files = [write_text(out / "identified.json", json.dumps(data, indent=2) + "\n"), *records]
     for par, ident in idents.items():
         files.append(figures.posterior_figure(ident, out / f"posterior_{par}.png"))
     lines = [f"# Identified interface resistances: {meas.source}", ""]
@@ -530,6 +532,23 @@ def _identify_report(meas: Measurements, settings: ReproduceSettings, out: Path,
     for line in headline_lines(head):
         echo(line)
     echo(f"identify: done in {time.perf_counter() - t0:.0f} s; wrote {_written(out, files)}")
+    return files
+
+
+def _predictive_records(idents: dict[str, Identification], data: dict,
+                        settings: ReproduceSettings, out: Path) -> list[Path]:
+    """Each joint identification's posterior record for ``itr predict`` and ``itr design``
+    (:mod:`itr_identify.inference.predictive`): its draws written beside identified.json,
+    the record under ``data[parametrisation]["predictive"]``; returns the draws' files."""
+    from ..inference.predictive import record_of, write_record
+
+    files = []
+    for par, ident in idents.items():
+        if ident.joint is None:
+            continue
+        block, path = write_record(record_of(ident), out)
+        data[par]["predictive"] = block
+        files.append(path)
     return files
 
 
