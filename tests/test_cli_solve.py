@@ -85,6 +85,28 @@ def test_tiff_of_tifffile_solved_as_the_api_solves_its_labels(tmp_path, capsys):
     assert {"material", "particle_id", "temperature_e1", "flux_e3"} <= set(grid.cell_data)
 
 
+def test_tiff_of_pillow_solved_as_the_api_solves_its_labels(tmp_path, capsys):
+    """A multi-page TIFF written by Pillow (an encoder that shares no code with tifffile),
+    one 8-bit page per slice, no voxel metadata: the tensor the API's on the same labels."""
+    from PIL import Image
+
+    labels, pid = two_filler_image()
+    pages = [Image.fromarray(page) for page in labels]
+    pages[0].save(tmp_path / "pil.tif", save_all=True, append_images=pages[1:])
+    status, res = solved(tmp_path, tmp_path / "pil.tif", "--phase", "0=matrix",
+                         "--phase", "1=Al2O3", "--phase", "2=AlN", "--voxel-um", "0.25",
+                         "--resistance", "Al2O3-matrix=1e-8", "--resistance",
+                         "AlN-silicone=2e-8", "--tol", "1e-10", "--out", tmp_path / "out")
+    assert status == 0
+    ms = Microstructure.from_labels(labels.astype(np.int32), pid, 0.25e-6,
+                                    ("silicone", "Al2O3", "AlN"))
+    mat = Materials(K, {("Al2O3", "silicone"): 1e-8, ("AlN", "silicone"): 2e-8},
+                    matrix="silicone", contact="area")
+    api = homogenize(ms, mat, tol=1e-10)
+    assert np.abs(np.array(res["k_eff_W_per_mK"]) - api.k_eff).max() <= 1e-10
+    assert res["particles"] == 6 and res["input"]["shape"] == [28, 28, 28]
+
+
 def test_bcc_sphere_array_image_against_the_multipole_reference(tmp_path, capsys):
     """A BCC array at f = 0.4 (the paper's Al2O3 in silicone, R = 2e-7 m^2 K/W) as a 64^3
     label image: its tensor within 1 % of the multipole value of the continuum problem,
