@@ -13,7 +13,10 @@ and ``<!-- /result-figures -->``, issue 48's (the paper's system as a file, the 
 system) in docs/own_system.md between ``<!-- system-figures -->`` and
 ``<!-- /system-figures -->``, and issue 49's (the discrepancy workflow's naming rule and
 Table 3's verdict) in docs/discrepancy.md between ``<!-- discrepancy-figures -->`` and
-``<!-- /discrepancy-figures -->``; nothing there is typed by hand (``BLOCKS`` lists each
+``<!-- /discrepancy-figures -->``, and issue 63's (``itr solve`` on images; ``itr predict``'s
+leave-one-formulation-out and ``itr design``) in docs/images.md and docs/predict_design.md
+between ``<!-- image-figures -->`` and ``<!-- predict-figures -->`` markers; nothing there is
+typed by hand (``BLOCKS`` lists each
 file and its markers). ``all`` does both.
 Options: ``--skip-tests`` (keep the recorded test figures), ``--skip-reproduce``.
 """
@@ -44,6 +47,8 @@ RESULTS_BEGIN, RESULTS_END = "<!-- result-figures -->", "<!-- /result-figures --
 SYSTEM_BEGIN, SYSTEM_END = "<!-- system-figures -->", "<!-- /system-figures -->"
 DISCREPANCY_BEGIN, DISCREPANCY_END = ("<!-- discrepancy-figures -->",
                                       "<!-- /discrepancy-figures -->")
+IMAGES_BEGIN, IMAGES_END = "<!-- image-figures -->", "<!-- /image-figures -->"
+PREDICT_BEGIN, PREDICT_END = "<!-- predict-figures -->", "<!-- /predict-figures -->"
 DOCS = ROOT / "docs"
 ITR = [sys.executable, "-m", "itr_identify.cli"]
 
@@ -360,6 +365,78 @@ def discrepancy_block() -> str:
     return " ".join(parts) + " Written by `validation/readme_figures.py` from those files."
 
 
+def image_block() -> str:
+    """docs/images.md's figures of issue 63 (``image_solve.json``)."""
+    d = _json("image_solve.json")
+    if not d:
+        return "Not measured yet."
+    api = d["api_vs_cli"]
+    worst = max(v["max_abs_difference"] for v in api.values())
+    arrays = "; ".join(f"{a['lattice'].upper()} {a['n']}^3 {a['k_image_W_per_mK']:.4f} against "
+                       f"{a['k_multipole_W_per_mK']:.4f} ({a['difference_percent']:+.2f} %)"
+                       for a in d["sphere_arrays"])
+    trips = d["round_trips"]["formats"]
+    same = all(v["labels_identical"] for v in trips.values())
+    rt = max(v["max_abs_difference"] for v in trips.values())
+    return (f"`validation/image_solve_study.py` (`validation/results/image_solve.json`): TIFFs "
+            f"written by tifffile (ImageJ metadata) solved by `itr solve` against "
+            f"`itr_fv.homogenize` on the same labels: largest difference {worst:.1g} W/(m K) "
+            f"over {len(api)} cases, the same iterations. Sphere arrays as label images (f = "
+            f"0.4, silicone and Al2O3, R = 2e-7 m^2 K/W) against the multipole reference: "
+            f"{arrays} W/(m K). One volume written and read in each of "
+            f"{', '.join(k.lstrip('.') for k in trips)}: labels "
+            f"{'identical' if same else 'DIFFER'}, largest tensor difference {rt:.1g}. "
+            "Written by `validation/readme_figures.py` from that file.")
+
+
+def predict_block() -> str:
+    """docs/predict_design.md's figures of issue 63 (``predict_loo.json``,
+    ``design_study.json``)."""
+    parts = []
+    loo = _json("predict_loo.json")
+    if loo:
+        outside = ", ".join(f"{r['formulation']} ({r['measured_mean']:.3f} against "
+                            f"{r['interval_90'][0]:.3f} - {r['interval_90'][1]:.3f})"
+                            for r in loo["rows"] if not r["inside"])
+        err = [abs(r["error_pct"]) for r in loo["rows"]]
+        parts.append(f"Leave-one-formulation-out on Table 3 (`itr identify` of the gap "
+                     f"parametrisation on eleven formulations at the shipped level, `itr "
+                     f"predict` of the twelfth): **{loo['inside']} of {loo['of']}** measured "
+                     f"means inside their 90 % predictive intervals (acceptance: "
+                     f"{loo['required_inside']})" + (f"; outside: {outside}" if outside else "")
+                     + f"; median error {sorted(err)[len(err) // 2]:.1f} %, largest "
+                     f"{max(err):.1f} % (`validation/results/predict_loo.md`).")
+    st = _json("design_study.json")
+    if st:
+        for name, run in (("the paper's system", st["paper"]), ("the ZnO example", st["zno"])):
+            d, ch = run["design"], run["design"]["choice"]
+            if ch is None:
+                parts.append(f"Design on {name}: nothing reaches {d['target']:g} W/(m K).")
+                continue
+            checks = "; ".join(f"{c['formulation']} full solves {c['full_solve_k']:.3f} "
+                               f"{'inside' if c['full_solve_inside'] else 'OUTSIDE'} "
+                               f"{c['surrogate_interval_90'][0]:.3f} - "
+                               f"{c['surrogate_interval_90'][1]:.3f}, own model "
+                               f"P = {c['direct_probability']:.2f}" for c in d["checks"])
+            parts.append(f"Design on {name} ({', '.join(d['space']['fillers'])}, "
+                         f"{d['space']['total_vol_pct'][0]:g}-{d['space']['total_vol_pct'][1]:g}"
+                         f" vol%, target {d['target']:g} W/(m K) with probability "
+                         f"{d['probability']:g}): **{ch['formulation']}**, k {ch['median']:.3f} "
+                         f"(90 % {ch['interval_90'][0]:.3f} - {ch['interval_90'][1]:.3f}), "
+                         f"P = {ch['probability']:.3f}; checks: {checks}; "
+                         f"{(run['identify_s'] + run['design_s']) / 60:.0f} min for "
+                         "identification and design on 2 cores.")
+        h = st["zno"]["held_out"]
+        parts.append(f"ZnO-80wt held out of the ZnO example (identified on ZnO-35 and "
+                     f"ZnO-55): measured mean {h['measured_mean']:.3f}, predicted "
+                     f"{h['median']:.3f} (90 % {h['interval_90'][0]:.3f} - "
+                     f"{h['interval_90'][1]:.3f}): {'inside' if h['inside'] else 'OUTSIDE'} "
+                     "(`validation/results/design_study.md`).")
+    if not parts:
+        return "Not measured yet."
+    return " ".join(parts) + " Written by `validation/readme_figures.py` from those files."
+
+
 def _replace(path: Path, begin: str, end: str, text: str) -> None:
     doc = path.read_text()
     if begin not in doc or end not in doc:
@@ -379,6 +456,8 @@ BLOCKS = [
     (DOCS / "own_system.md", SYSTEM_BEGIN, SYSTEM_END, lambda data: system_block()),
     (DOCS / "discrepancy.md", DISCREPANCY_BEGIN, DISCREPANCY_END,
      lambda data: discrepancy_block()),
+    (DOCS / "images.md", IMAGES_BEGIN, IMAGES_END, lambda data: image_block()),
+    (DOCS / "predict_design.md", PREDICT_BEGIN, PREDICT_END, lambda data: predict_block()),
 ]
 
 
