@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 
 from .core import CLIError, number, output_folder
-from .predict import _engine, prediction_arguments, read_identified
+from .predict import _engine, plan, prediction_arguments, read_identified
 
 __all__ = ["add_parser"]
 
@@ -63,18 +63,18 @@ def _space(args: argparse.Namespace, system):
 
 def _run(args: argparse.Namespace) -> int:
     from ..workflows.design import run_design
-    from ..workflows.predict import check_names, forward_settings_of
+    from ..workflows.predict import check_names
 
     record, system = read_identified(args)
     space = _space(args, system)
     cost = _costs(args.cost, space.fillers)
     try:
-        forward_settings_of(record, system)
-        check_names([space.name(s, t) for s, t in space.anchors()], system, record)
+        anchors = check_names([space.name(s, t) for s, t in space.anchors()], system, record)
+        work = plan(args, record, system, anchors)
     except ValueError as exc:
         raise CLIError(str(exc).replace("formulations:", "--fillers:", 1)
                        .replace("identified:", "IDENTIFIED:", 1), 2) from None
-    with output_folder(args.out, "design", folders=("solves",)) as out:
+    with output_folder(args.out, "design", folders=("solves",), workload=work) as out:
         with _engine(args, out) as engine:
             run_design(record, space, out, identified=args.identified, target=args.target,
                        probability=args.probability, cost=cost, replicates=args.replicates,

@@ -6,7 +6,7 @@ import argparse
 
 from .core import CLIError, engine_options, number, output_folder
 
-__all__ = ["add_parser", "read_identified"]
+__all__ = ["add_parser", "read_identified", "plan", "prediction_arguments"]
 
 
 def read_identified(args: argparse.Namespace):
@@ -35,17 +35,30 @@ def _engine(args: argparse.Namespace, out):
                        store=opts["store"])
 
 
+def plan(args: argparse.Namespace, record, system, names):
+    """The work of building ``names`` as the identification built its formulations (the
+    plan printed, and refused where it cannot fit, before any work)."""
+    from ..forward.work_estimate import identification_workload
+    from ..inference.formulations import fractions_of
+    from ..workflows.predict import forward_settings_of
+
+    fw = forward_settings_of(record, system)
+    return identification_workload(fw, {n: fractions_of(n, system) for n in names},
+                                   (record.parametrisation,), validation=False,
+                                   workers=args.workers, scheduler=args.scheduler)
+
+
 def _run(args: argparse.Namespace) -> int:
-    from ..workflows.predict import check_names, forward_settings_of, run_predict
+    from ..workflows.predict import check_names, run_predict
 
     record, system = read_identified(args)
     try:
-        forward_settings_of(record, system)
         names = check_names(args.formulations, system, record)
+        work = plan(args, record, system, names)
     except ValueError as exc:
         raise CLIError(str(exc).replace("formulations:", "FORMULATION:", 1)
                        .replace("identified:", "IDENTIFIED:", 1), 2) from None
-    with output_folder(args.out, "predict", folders=("solves",)) as out:
+    with output_folder(args.out, "predict", folders=("solves",), workload=work) as out:
         with _engine(args, out) as engine:
             run_predict(record, names, out, identified=args.identified, system=system,
                         replicates=args.replicates, level=args.level, seed=args.seed,

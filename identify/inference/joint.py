@@ -52,7 +52,7 @@ quantiles move by several per cent between two runs; the averaged ones do not.
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field, replace
 from functools import cached_property
 from typing import Any
@@ -497,16 +497,21 @@ class JointLikelihood:
         self.density = density_data(measurements, tables, densities, space.matrix)
         self.series = thickness_series(measurements, list(tables))
         self._prepare()
-        self.bound: BoundEffect | None = None
-        if space.effect is not None:
-            if matrix_conductivity is None:
-                raise ValueError("matrix_conductivity: an effect's terms need the matrix's "
-                                 "nominal conductivity, W/(m K)")
-            self.bound = space.effect.bind(
-                self.order, {f: t.fractions for f, t in self.tables.items()},
-                {f: t.parameters for f, t in self.tables.items()},
-                matrix_conductivity=matrix_conductivity,
-                inverse_thickness=_inverse_thickness(measurements, self.order))
+        self.bound: BoundEffect | None = self._bound(
+            matrix_conductivity, lambda: _inverse_thickness(measurements, self.order))
+
+    def _bound(self, matrix_conductivity: float | None,
+               inverse_thickness: Callable[[], Mapping[str, float]]) -> BoundEffect | None:
+        """The space's effect bound to the tables (None without one)."""
+        if self.space.effect is None:
+            return None
+        if matrix_conductivity is None:
+            raise ValueError("matrix_conductivity: an effect's terms need the matrix's "
+                             "nominal conductivity, W/(m K)")
+        return self.space.effect.bind(
+            self.order, {f: t.fractions for f, t in self.tables.items()},
+            {f: t.parameters for f, t in self.tables.items()},
+            matrix_conductivity=matrix_conductivity, inverse_thickness=inverse_thickness())
 
     @classmethod
     def predictor(cls, tables: Mapping[str, Tabulated], space: JointSpace, *,
@@ -521,16 +526,9 @@ class JointLikelihood:
         self.space = space
         self.scatter = dict(scatter)
         self.data = {f: (math.nan, 0.0, 1) for f in tables}
-        self.density, self.series, self.bound = {}, {}, None
+        self.density, self.series = {}, {}
         self._prepare()
-        if space.effect is not None:
-            if matrix_conductivity is None:
-                raise ValueError("matrix_conductivity: an effect's terms need the matrix's "
-                                 "nominal conductivity, W/(m K)")
-            self.bound = space.effect.bind(
-                self.order, {f: t.fractions for f, t in self.tables.items()},
-                {f: t.parameters for f, t in self.tables.items()},
-                matrix_conductivity=matrix_conductivity)
+        self.bound = self._bound(matrix_conductivity, dict)
         return self
 
     def predictive_of_model(self, cols: Mapping[str, np.ndarray]

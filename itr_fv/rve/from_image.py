@@ -34,7 +34,7 @@ from collections.abc import Mapping
 import numpy as np
 
 from ..materials.properties import Materials
-from .microstructure import Microstructure, label_counts
+from .microstructure import Microstructure, _join_periodic, label_counts, periodic_components
 from .phase_table import PhaseTable
 from .volume_files import LabelVolume, _label_array
 
@@ -45,43 +45,6 @@ __all__ = ["microstructure_from_image", "label_particles", "periodic_components"
 SPLITS = ("watershed",)
 #: Default least distance between two particle centres of the watershed split, voxels.
 DEFAULT_SPLIT_DISTANCE_VOXELS = 5
-
-
-def _join_periodic(labels: np.ndarray, n: int) -> tuple[np.ndarray, int]:
-    """``labels`` (1..n, 0 background) with the labels that face each other across the
-    three pairs of opposite box faces joined, renumbered 1..m in order of first label."""
-    if n < 1:
-        return labels.astype(np.int32, copy=False), 0
-    parent = np.arange(n + 1)
-
-    def root(i: int) -> int:
-        while parent[i] != i:
-            parent[i] = parent[parent[i]]
-            i = parent[i]
-        return i
-
-    for axis in range(3):
-        a = np.take(labels, 0, axis=axis).ravel()
-        b = np.take(labels, -1, axis=axis).ravel()
-        both = (a > 0) & (b > 0)
-        for i, j in set(zip(a[both].tolist(), b[both].tolist())):
-            ri, rj = root(i), root(j)
-            if ri != rj:
-                parent[max(ri, rj)] = min(ri, rj)
-    roots = np.array([root(i) for i in range(n + 1)])
-    kept = np.unique(roots[1:])
-    renumber = np.zeros(n + 1, dtype=np.int32)
-    renumber[1:] = np.searchsorted(kept, roots[1:]) + 1
-    return renumber[labels], int(kept.size)
-
-
-def periodic_components(mask: np.ndarray) -> tuple[np.ndarray, int]:
-    """Face-connected pieces of ``mask`` in the periodic box: labels 1..n (0 outside the
-    mask), int32, and n."""
-    from scipy import ndimage
-
-    labels, n = ndimage.label(mask)  # the default structure: face connectivity
-    return _join_periodic(labels, int(n))
 
 
 def watershed_split(mask: np.ndarray, *, split_distance_voxels: int =
