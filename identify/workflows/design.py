@@ -172,7 +172,7 @@ def run_design(record: PredictiveRecord, space: DesignSpace, out: Path, *, ident
             "target": target, "probability": probability, "cost": dict(cost or {}),
             "replicates": replicates, "seed": seed, "draws": int(record.draws.shape[0]),
             "choice": choice.to_dict() if choice is not None else None, "checks": checks,
-            "max_probability": float(p.max())}
+            "max_probability": float(p.max()), "anchors": _levels(models, record)}
     files.insert(0, write_text(out / "design.json", json.dumps(data, indent=2) + "\n"))
     lines = design_lines(data)
     files.insert(1, write_text(out / "design.md", "\n".join(
@@ -186,12 +186,25 @@ def run_design(record: PredictiveRecord, space: DesignSpace, out: Path, *, ident
     return files
 
 
+def _levels(models: Mapping, record: PredictiveRecord) -> dict[str, dict]:
+    """Per anchor how its level was set at the quoted point (shipped or runtime, factor)."""
+    out = {}
+    for name, m in models.items():
+        lv = m.level_at({p: record.quoted[p] for p in m.parameters})
+        out[name] = {"level": lv["source"], "factor": float(lv["factor"])}
+    return out
+
+
 def design_lines(data: dict) -> list[str]:
     """What the design found, as Markdown lines."""
     ch, tgt, prob = data["choice"], data["target"], data["probability"]
+    levels = ("Anchors and their level at the quoted resistances: " + ", ".join(
+        f"{n} ({a['level']} x{a['factor']:.3f})" for n, a in data.get("anchors", {}).items())
+        + ".")
     if ch is None:
         return [f"No formulation of the space reaches {tgt:g} W/(m K) with probability "
-                f"{prob:g} (the most probable reaches it with {data['max_probability']:.2f})."]
+                f"{prob:g} (the most probable reaches it with {data['max_probability']:.2f}).",
+                "", levels]
     lines = [f"Cheapest formulation reaching {tgt:g} W/(m K) with probability >= {prob:g}: "
              f"**{ch['formulation']}** (probability {ch['probability']:.3f}, cost "
              f"{ch['cost']:.4g}); k {ch['median']:.3f} W/(m K), 90 % interval "
@@ -207,4 +220,4 @@ def design_lines(data: dict) -> list[str]:
                          f"{r['direct_median']:.3f} ({dlo:.3f} - {dhi:.3f}) | "
                          f"{r['direct_probability']:.3f} | {r['full_solve_k']:.3f} | "
                          f"{'yes' if r['full_solve_inside'] else 'NO'} |")
-    return lines
+    return lines + ["", levels]
