@@ -106,7 +106,14 @@ def _model_for(name: str, record: PredictiveRecord, settings: ForwardSettings, *
     """One formulation's forward model built and set to its level at the quoted point."""
     par = PARAMETRISATIONS[record.parametrisation]
     fractions = fractions_of(name, settings.system)
-    m = ForwardModel(name, fractions, par, settings, engine=engine).build(progress=progress)
+    fixed = {}
+    if par.contact == "area" and len(fractions) > 1:
+        # as the identification holds its hybrids under the per-area model: the fillers'
+        # own parameters at the point quoted, the pair's contact varied
+        own = {p for f in fractions for p in par.parameters([f], matrix=settings.system.matrix)}
+        fixed = {p: record.quoted[p] for p in sorted(own) if p in record.quoted}
+    m = ForwardModel(name, fractions, par, settings, fixed=fixed, engine=engine).build(
+        progress=progress)
     values = {p: record.quoted[p] for p in m.parameters}
     m.anchor_at(values)
     if m.shipped is None and settings.faithful is not None and par.name == "gap":
