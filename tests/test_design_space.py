@@ -85,3 +85,30 @@ def test_nothing_reaching_the_target_is_said():
     draws = np.ones((1, totals.size, 10))
     choice, p, _ = choose(space, draws, shares, totals, target=2.0, probability=0.95)
     assert choice is None and p.max() == 0
+
+
+class _Residuals:
+    """A likelihood's face that formulation_sd reads: model k and variance at the draws,
+    and the measured means."""
+
+    def __init__(self, means, k, v):
+        self.order = [f"F{i}" for i in range(len(means))]
+        self.data = {f: (m, 0.0, 4) for f, m in zip(self.order, means)}
+        self._k, self._v = np.asarray(k, float), np.asarray(v, float)
+
+    def predictive(self, theta):
+        n = theta.shape[0]
+        return np.repeat(self._k[:, None], n, axis=1), np.repeat(self._v[:, None], n, axis=1)
+
+
+def test_formulation_sd_brings_the_chi_square_to_its_degrees_of_freedom():
+    from itr_identify.inference.predictive import formulation_sd
+
+    # four formulations, model k 1 and sd 0.1 each, every mean 0.3 off: chi-square 36 on
+    # 4 - 1 = 3 dof; 4 * 0.09 / (0.01 + s^2) = 3 gives s^2 = 0.11
+    lik = _Residuals([1.3, 0.7, 1.3, 0.7], [1, 1, 1, 1], [0.01] * 4)
+    assert formulation_sd(lik, np.zeros((5, 2)), fitted=1) == pytest.approx(0.11 ** 0.5,
+                                                                            rel=1e-9)
+    # a fit that passes its test leaves no misfit term
+    ok = _Residuals([1.05, 0.95, 1.0, 1.0], [1, 1, 1, 1], [0.01] * 4)
+    assert formulation_sd(ok, np.zeros((5, 2)), fitted=1) == 0.0

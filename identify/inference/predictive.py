@@ -14,7 +14,14 @@ are (:class:`~.joint.Tabulated`), at every draw:
 - then the noise of a measured mean of ``replicates`` samples: the pooled relative replicate sd
   of the identification's table over sqrt(``replicates``), the RVE scatter of its system (the
   identified system's pooled one, else the model's own), the model level's own sd, the
-  surrogate's error bound and the pooled packing sd, each drawn once per draw.
+  surrogate's error bound and the pooled packing sd, each drawn once per draw;
+- and the formulation's own misfit: where the identification's fit fails its chi-square test
+  (Table 3's does: chi-square 77 on 9 degrees of freedom with the model form), the measured
+  formulations scatter about the model by more than every term above allows, and a new
+  formulation will too. :func:`formulation_sd` estimates that scatter from the
+  identification's own residuals (the relative sd ``s`` that brings their chi-square to its
+  degrees of freedom, the measured formulations less the resistances; 0 where the fit
+  passes), and the prediction adds ``(s k)^2`` to its variance.
 
 The equal-tailed interval of those values is the predictive interval of the measured mean.
 
@@ -39,7 +46,8 @@ from .effect_terms import JointEffect
 from .joint import FRACTION_UNIT, JointLikelihood, JointSpace, Tabulated
 
 __all__ = ["PredictiveRecord", "Prediction", "record_of", "write_record", "read_record",
-           "predict", "model_draws", "measured_draws", "with_draws", "RECORD_DRAWS",
+           "predict", "model_draws", "measured_draws", "with_draws", "formulation_sd",
+           "RECORD_DRAWS",
            "DEFAULT_REPLICATES", "DEFAULT_LEVEL"]
 
 #: Equal-weight draws of the joint posterior kept for prediction (by weight, counted).
@@ -80,6 +88,8 @@ class PredictiveRecord:
         The effect fitted inside the identification (:mod:`.effect_terms`), if any.
     measured : tuple of str
         The formulations the identification was fitted on.
+    formulation_sd : float
+        Relative sd of a formulation's own misfit (:func:`formulation_sd`).
     """
 
     parametrisation: str
@@ -92,12 +102,14 @@ class PredictiveRecord:
     draws: np.ndarray
     effect: str | None = None
     measured: tuple[str, ...] = ()
+    formulation_sd: float = 0.0
 
     def to_dict(self, draws_file: str, draws_sha256: str) -> dict[str, Any]:
         """The JSON block (the draws in ``draws_file``)."""
         return {"format": RECORD_FORMAT, "parametrisation": self.parametrisation,
                 "space": self.space, "group_means": self.group_means,
                 "scatter": self.scatter, "replicate_sd": self.replicate_sd,
+                "formulation_sd": self.formulation_sd,
                 "quoted": self.quoted, "settings": self.settings, "effect": self.effect,
                 "measured": list(self.measured), "draws_file": draws_file,
                 "draws_sha256": draws_sha256, "draws": int(self.draws.shape[0])}
@@ -141,6 +153,7 @@ def record_of(ident, *, draws: int = RECORD_DRAWS, joint=None,
     settings = {**ident.settings.to_dict(), "fidelity": fidelity_name(ident.settings.faithful)}
     if sp.effect is not None:
         settings["effect_reference_fraction"] = sp.effect.reference_fraction
+    n_r = sum(n.startswith("log10 ") for n in sp.names)
     return PredictiveRecord(
         ident.parametrisation,
         {"names": list(sp.names), "kinds": list(sp.kinds), "a": list(sp.a), "b": list(sp.b),
@@ -148,7 +161,34 @@ def record_of(ident, *, draws: int = RECORD_DRAWS, joint=None,
         {g: float(np.mean(v)) for g, v in by.items()},
         {g: float(s) for g, s in lik.scatter.items()},
         _replicate_sd(ident.measurements), quoted, settings, samples, effect,
-        tuple(ident.measurements.formulations))
+        tuple(ident.measurements.formulations),
+        formulation_sd(lik, samples[:: max(1, samples.shape[0] // MISFIT_DRAWS)],
+                       fitted=n_r))
+
+
+#: Posterior draws over which :func:`formulation_sd` averages the model's k and variance.
+MISFIT_DRAWS = 2000
+
+
+def formulation_sd(likelihood: JointLikelihood, theta: np.ndarray, *, fitted: int) -> float:
+    """The relative sd ``s`` of the measured formulations' own misfit (module notes): with
+    each formulation's model k and variance averaged over the draws ``theta`` (the measured
+    mean's standard error, RVE scatter, level, error bound, packing and the model form as
+    the likelihood has them), the ``s`` at which ``sum (m - k)^2 / (v + (s k)^2)`` equals
+    the formulations less ``fitted`` (at least one); 0 where it is already below."""
+    k, v = likelihood.predictive(theta)
+    mean = np.array([likelihood.data[f][0] for f in likelihood.order])
+    kbar, vbar = k.mean(axis=1), v.mean(axis=1)
+    r2 = (mean - kbar) ** 2
+    dof = max(len(mean) - fitted, 1)
+    chi2 = lambda x: float(np.sum(r2 / (vbar + (x * kbar) ** 2)))  # noqa: E731
+    if chi2(0.0) <= dof:
+        return 0.0
+    lo, hi = 0.0, 1.0
+    for _ in range(60):                       # chi2 falls monotonically in s
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if chi2(mid) > dof else (lo, mid)
+    return 0.5 * (lo + hi)
 
 
 def _sha256(path: Path) -> str:
@@ -195,7 +235,8 @@ def read_record(path: str | Path, parametrisation: str | None = None, *,
     return PredictiveRecord(block["parametrisation"], block["space"], block["group_means"],
                             block["scatter"], float(block["replicate_sd"]), block["quoted"],
                             block["settings"], draws, block.get("effect"),
-                            tuple(block.get("measured", ())))
+                            tuple(block.get("measured", ())),
+                            float(block.get("formulation_sd", 0.0)))
 
 
 def _identified(path: Path) -> dict:
@@ -355,8 +396,9 @@ def model_draws(record: PredictiveRecord, tables: Mapping[str, Tabulated], *, se
 def measured_draws(record: PredictiveRecord, k: np.ndarray, v: np.ndarray, *,
                    replicates: int, rng: np.random.Generator) -> np.ndarray:
     """Draws of a measured mean of ``replicates`` samples about the model's ``k`` (any
-    shape) with the model variance ``v``: the record's pooled replicate sd added."""
-    se2 = (record.replicate_sd * k) ** 2 / replicates
+    shape) with the model variance ``v``: the record's pooled replicate sd and its
+    formulation misfit (:func:`formulation_sd`) added."""
+    se2 = (record.replicate_sd * k) ** 2 / replicates + (record.formulation_sd * k) ** 2
     return k + np.sqrt(v + se2) * rng.standard_normal(k.shape)
 
 
