@@ -338,7 +338,10 @@ def _space_for(record: PredictiveRecord, tables: Mapping[str, Tabulated],
         g, total = t.group, sum(t.fractions.values())
         centre = record.group_means.get(g, total)
         groups[f] = (g, (total - centre) / FRACTION_UNIT)
-        wanted = [f"offset_{g}", f"slope_{g}"] if form else []
+        # the shared correction's offset wherever the model carries one, the slope with
+        # the model form
+        wanted = ([f"offset_{g}"] if form or t.system else []) + (
+            [f"slope_{g}"] if form else [])
         for n in wanted:
             if n not in names and n not in sp["held"] and n not in added:
                 added.append(n)
