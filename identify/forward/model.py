@@ -595,10 +595,15 @@ class ForwardModel:
 
     def solve_replicas(self, values: Mapping[str, float],
                        tick: Callable[[], None] | None = None, *,
-                       purpose: str = "validation") -> np.ndarray:
+                       purpose: str = "validation",
+                       inputs: Mapping[str, float] | None = None) -> np.ndarray:
         """Full solves (replicas, 3) of every replica at ``values``, W/(m K); the anchor's
-        solves are reused when ``values`` is the anchor."""
+        solves are reused when ``values`` is the anchor; ``inputs``: phase conductivities
+        other than the system's nominal ones (``k_<phase>``, W/(m K))."""
         values = {p: float(values[p]) for p in self.parameters}
+        if inputs:
+            return self._solve_all({**values, **{k: float(v) for k, v in inputs.items()}},
+                                   purpose=purpose, tick=tick)
         if self.anchor_k is not None and values == self.anchor:
             if tick is not None:
                 for _ in self.microstructures:

@@ -8,8 +8,9 @@ anchors is interpolated over the space (the surrogate), the measured mean's nois
 the cheapest point whose measured mean reaches the target with the probability asked is
 chosen. Candidates near it (the chosen point and its neighbours one total step either side)
 are checked: each built as its own formulation, predicted directly from its own model, and
-solved in full on its RVE replicas at the quoted resistances (at the identification's
-level); the check holds where those full solves lie inside the surrogate's 90 % interval.
+solved in full on its RVE replicas at the posterior's point (the quoted resistances and the
+phase conductivities' posterior medians; at the identification's level); the check holds
+where those full solves lie inside the surrogate's 90 % interval.
 Writes ``design.json``, ``design.md``, ``design.png`` and ``manifest.json``.
 """
 
@@ -107,7 +108,8 @@ def _checks(space: DesignSpace, choice: Choice, y: np.ndarray, grid: tuple, *,
         lo, med, hi = np.quantile(y[i, j], [0.05, 0.5, 0.95])
         m = models[name]
         values = {p: record.quoted[p] for p in m.parameters}
-        full = float((m.solve_replicas(values, purpose="design check")
+        full = float((m.solve_replicas(values, purpose="design check",
+                                       inputs=median_inputs(record, settings.system))
                       * m.level_at(values)["factor"]).mean())
         d = direct[name]
         rows.append({"formulation": name, "surrogate_median": float(med),
@@ -117,6 +119,16 @@ def _checks(space: DesignSpace, choice: Choice, y: np.ndarray, grid: tuple, *,
                      "direct_probability": d.probability_above(target),
                      "full_solve_k": full, "full_solve_inside": bool(lo <= full <= hi)})
     return rows
+
+
+def median_inputs(record: PredictiveRecord, system: MaterialSystem) -> dict[str, float]:
+    """The phase conductivities at the posterior's medians (``k_<phase>``, W/(m K)), where
+    the identification sampled them."""
+    nominal = system.conductivities()
+    names = record.space["names"]
+    return {f"k_{n[len('ln k_'):]}": float(nominal[n[len("ln k_"):]]
+                                          * np.exp(np.median(record.draws[:, i])))
+            for i, n in enumerate(names) if n.startswith("ln k_")}
 
 
 def _candidates(names: list[str], record: PredictiveRecord, settings,
