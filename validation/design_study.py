@@ -5,7 +5,7 @@ ZnO formulation held out (issue 63).
    default fidelity ``shipped``), then ``itr design ... --fillers Al2O3,AlN --total 50-65
    --target 2.0``: the cheapest formulation whose measured mean (four samples) reaches 2.0
    W/(m K) with probability 0.95, and its neighbours checked by their own models and full
-   solves.
+   solves; and, since nothing in that space reaches 2.0 with 0.95, the same with target 1.8.
 2. The ZnO-in-epoxy example (``examples/zno_epoxy``, synthetic measurements from a higher
    fidelity with inputs off their nominal values): identified on ZnO-35 and ZnO-55 only,
    ``itr predict`` of the held-out ZnO-80wt (45.05 vol%) against its two measured samples;
@@ -59,8 +59,14 @@ def paper(work: Path) -> dict:
     ident = str(work / "paper_ident" / "identified.json")
     t_de = _itr(work / "paper_design", "design", ident, "--fillers", "Al2O3,AlN",
                 "--total", "50-65", "--target", "2.0", "--store", store)
+    # the issue's command reaches 2.0 nowhere with 0.95 (its best point 0.93): a target the
+    # space reaches, chosen after that run, to show a choice and its checks
+    t_lo = _itr(work / "paper_design_1.8", "design", ident, "--fillers", "Al2O3,AlN",
+                "--total", "50-65", "--target", "1.8", "--store", store)
     shutil.copyfile(work / "paper_design" / "design.png", RESULTS / "design_paper.png")
-    return {"identify_s": t_id, "design_s": t_de, "design": _design(work / "paper_design")}
+    shutil.copyfile(work / "paper_design_1.8" / "design.png", RESULTS / "design_paper_1.8.png")
+    return {"identify_s": t_id, "design_s": t_de, "design": _design(work / "paper_design"),
+            "reachable": {"design_s": t_lo, "design": _design(work / "paper_design_1.8")}}
 
 
 def zno(work: Path) -> dict:
@@ -105,7 +111,9 @@ def _lines(name: str, run: dict) -> list[str]:
            f"anchors {', '.join(d['space']['anchors'])}; target {d['target']:g} W/(m K) "
            f"with probability {d['probability']:g}.", ""]
     if ch is None:
-        return out + ["Nothing in the space reaches the target.", ""]
+        return out + [f"Nothing in the space reaches the target with probability "
+                      f"{d['probability']:g}; the most probable point reaches it with "
+                      f"{d['max_probability']:.3f}.", ""]
     out += [f"Chosen: **{ch['formulation']}**, k {ch['median']:.3f} W/(m K) (90 % "
             f"{ch['interval_90'][0]:.3f} - {ch['interval_90'][1]:.3f}), probability "
             f"{ch['probability']:.3f}.", "",
@@ -132,6 +140,8 @@ def main(argv: list[str] | None = None) -> int:
     h = data["zno"]["held_out"]
     md = ["# `itr design` and `itr predict` studies", ""]
     md += _lines("The paper's system (Table 3, gap, fidelity shipped)", data["paper"])
+    md += _lines("The paper's system, target 1.8 W/(m K) (chosen after the 2.0 run)",
+                 {"identify_s": 0.0, **data["paper"]["reachable"]})
     md += _lines("ZnO in epoxy (examples/zno_epoxy)", data["zno"])
     md += [f"ZnO-80wt held out (identified on ZnO-35 and ZnO-55): measured mean "
            f"{h['measured_mean']:.3f}, predicted {h['median']:.3f} (90 % "

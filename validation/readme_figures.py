@@ -408,10 +408,19 @@ def predict_block() -> str:
                      f"{max(err):.1f} % (`validation/results/predict_loo.md`).")
     st = _json("design_study.json")
     if st:
-        for name, run in (("the paper's system", st["paper"]), ("the ZnO example", st["zno"])):
+        runs = [("the paper's system", st["paper"])]
+        if "reachable" in st["paper"]:
+            runs.append(("the paper's system (a second target, chosen after the first run)",
+                         {"identify_s": 0.0, **st["paper"]["reachable"]}))
+        for name, run in runs + [("the ZnO example", st["zno"])]:
             d, ch = run["design"], run["design"]["choice"]
             if ch is None:
-                parts.append(f"Design on {name}: nothing reaches {d['target']:g} W/(m K).")
+                parts.append(f"Design on {name} ({', '.join(d['space']['fillers'])}, "
+                             f"{d['space']['total_vol_pct'][0]:g}-"
+                             f"{d['space']['total_vol_pct'][1]:g} vol%, target "
+                             f"{d['target']:g} W/(m K) with probability {d['probability']:g}): "
+                             f"no formulation reaches it; the most probable point reaches it "
+                             f"with {d['max_probability']:.2f}.")
                 continue
             checks = "; ".join(f"{c['formulation']} full solves {c['full_solve_k']:.3f} "
                                f"{'inside' if c['full_solve_inside'] else 'OUTSIDE'} "

@@ -596,14 +596,16 @@ class ForwardModel:
     def solve_replicas(self, values: Mapping[str, float],
                        tick: Callable[[], None] | None = None, *,
                        purpose: str = "validation",
-                       inputs: Mapping[str, float] | None = None) -> np.ndarray:
+                       inputs: Mapping[str, float] | None = None,
+                       film_m: float | None = None) -> np.ndarray:
         """Full solves (replicas, 3) of every replica at ``values``, W/(m K); the anchor's
         solves are reused when ``values`` is the anchor; ``inputs``: phase conductivities
-        other than the system's nominal ones (``k_<phase>``, W/(m K))."""
+        other than the system's nominal ones (``k_<phase>``, W/(m K)); ``film_m``: touching
+        particles at this film, m (default the RVE's own)."""
         values = {p: float(values[p]) for p in self.parameters}
-        if inputs:
-            return self._solve_all({**values, **{k: float(v) for k, v in inputs.items()}},
-                                   purpose=purpose, tick=tick)
+        if inputs or film_m is not None:
+            return self._solve_all({**values, **{k: float(v) for k, v in (inputs or {}).items()}},
+                                   purpose=purpose, tick=tick, film_m=film_m)
         if self.anchor_k is not None and values == self.anchor:
             if tick is not None:
                 for _ in self.microstructures:
@@ -626,11 +628,12 @@ class ForwardModel:
             formulation=self.formulation, replica=replica)
 
     def _solve_all(self, values: Mapping[str, float], *, purpose: str,
-                   tick: Callable[[], None] | None = None) -> np.ndarray:
+                   tick: Callable[[], None] | None = None,
+                   film_m: float | None = None) -> np.ndarray:
         """Full solves (replicas, 3) of every replica at ``values`` on the engine (the
         replicas in parallel where it has workers), recorded in :attr:`solves`."""
         mat = self.materials(values)
-        requests = [self._request(r, mat, purpose=purpose)
+        requests = [self._request(r, mat, purpose=purpose, film_m=film_m)
                     for r in range(len(self.microstructures))]
         results = self._solve_recorded(requests, tick=tick)
         return np.array([res.k_diagonal for res in results])

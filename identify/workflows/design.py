@@ -107,10 +107,7 @@ def _checks(space: DesignSpace, choice: Choice, y: np.ndarray, grid: tuple, *,
         j = int(np.argmin(np.abs(totals - t)))
         lo, med, hi = np.quantile(y[i, j], [0.05, 0.5, 0.95])
         m = models[name]
-        values = {p: record.quoted[p] for p in m.parameters}
-        full = float((m.solve_replicas(values, purpose="design check",
-                                       inputs=median_inputs(record, settings.system))
-                      * m.level_at(values)["factor"]).mean())
+        full = _full_at_point(m, tables[name], record, settings.system)
         d = direct[name]
         rows.append({"formulation": name, "surrogate_median": float(med),
                      "surrogate_interval_90": [float(lo), float(hi)],
@@ -121,14 +118,30 @@ def _checks(space: DesignSpace, choice: Choice, y: np.ndarray, grid: tuple, *,
     return rows
 
 
-def median_inputs(record: PredictiveRecord, system: MaterialSystem) -> dict[str, float]:
-    """The phase conductivities at the posterior's medians (``k_<phase>``, W/(m K)), where
-    the identification sampled them."""
-    nominal = system.conductivities()
+def _full_at_point(model, table, record: PredictiveRecord, system: MaterialSystem) -> float:
+    """The full solves' k_iso (mean over replicas and directions) at the posterior's point,
+    W/(m K): the quoted resistances, the phase conductivities and the film at their
+    posterior medians, times the level's factor there and the model form's and shared
+    correction's factor at that point (the one formula of the joint model: the table's k
+    at the point over its k with those terms at 0; 1 for a filler system not measured)."""
     names = record.space["names"]
-    return {f"k_{n[len('ln k_'):]}": float(nominal[n[len("ln k_"):]]
-                                          * np.exp(np.median(record.draws[:, i])))
-            for i, n in enumerate(names) if n.startswith("ln k_")}
+    point = np.median(record.draws, axis=0)
+    nominal = system.conductivities()
+    inputs = {f"k_{n[5:]}": float(nominal[n[5:]] * np.exp(point[i]))
+              for i, n in enumerate(names) if n.startswith("ln k_")}
+    film = float(point[names.index("film_nm")]) * 1e-9 if "film_nm" in names else None
+    values = {p: record.quoted[p] for p in model.parameters}
+    k = float((model.solve_replicas(values, purpose="design check", inputs=inputs,
+                                    film_m=film) * model.level_at(values)["factor"]).mean())
+    if record.effect is not None or table.group not in record.group_means:
+        return k
+    bare = point.copy()
+    for i, n in enumerate(names):
+        if n.startswith(("offset_", "slope_")):
+            bare[i] = 0.0
+    at = {name: model_draws(with_draws(record, row[None, :]), {"x": table})[1][0, 0]
+          for name, row in (("point", point), ("bare", bare))}
+    return k * at["point"] / at["bare"]
 
 
 def _candidates(names: list[str], record: PredictiveRecord, settings,
