@@ -256,3 +256,16 @@ def test_memory_refusal_before_any_work(tmp_path, capsys, monkeypatch):
     assert status == 2
     assert "crop or downsample" in refused_on_cli(capsys.readouterr().err, "memory")
     assert not (tmp_path / "out").exists()
+
+
+def test_the_progress_bar_counts_residual_decades_of_each_load_case():
+    from itr_identify.workflows.image_solve import residual_bar
+
+    bar, callback = residual_bar(1e-8, progress=True)
+    assert bar.total == 3 * 8
+    for res in (0.5, 0.05, 2e-3, 1e-9):        # direction 0 reaches the tolerance
+        callback(0, 1, res)
+    callback(1, 1, 0.009)                      # direction 1: two decades so far
+    callback(1, 2, 0.02)                       # a residual that rises counts nothing back
+    assert bar.n == 8 + 2
+    bar.close()

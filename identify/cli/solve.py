@@ -129,7 +129,7 @@ def _run(args: argparse.Namespace) -> int:
         print(plan.alternatives())
         return 0
     with output_folder(args.out, "solve", workload=plan) as out:
-        run_image_solve(job, out)
+        run_image_solve(job, out, progress=not args.no_progress)
     return 0
 
 
@@ -179,4 +179,6 @@ def add_parser(sub) -> None:
     p.add_argument("--plan", action="store_true",
                    help="check the inputs, print the plan (memory, time) and stop, before "
                    "any solving")
+    p.add_argument("--no-progress", action="store_true",
+                   help="no progress bar (the load cases by decades of their residual)")
     p.set_defaults(func=_run)

@@ -199,9 +199,29 @@ def _summary_lines(summary: dict) -> list[str]:
     return lines
 
 
-def run_image_solve(job: ImageJob, out: Path, echo: Callable[[str], None] = print
-                    ) -> list[Path]:
-    """Solve the job's image and write its folder; returns the files (manifest last).
+def residual_bar(tol: float, *, cases: int = 3, progress: bool = True):
+    """A progress bar of a solve's load cases by decades of their relative residual (down
+    to ``tol``; tqdm's ETA) and the solver callback that moves it; returns (bar, callback)."""
+    from tqdm.auto import tqdm
+
+    decades = max(1, math.ceil(-math.log10(tol) - 1e-9))
+    bar = tqdm(total=cases * decades, desc=f"solve ({cases} load cases)", unit="decade",
+               disable=not progress)
+    reached: dict[int, int] = {}
+
+    def callback(direction: int, iteration: int, residual: float) -> None:
+        d = min(decades, max(0, int(math.floor(-math.log10(max(residual, 1e-300))))))
+        if d > reached.get(direction, 0):
+            bar.update(d - reached.get(direction, 0))
+            reached[direction] = d
+
+    return bar, callback
+
+
+def run_image_solve(job: ImageJob, out: Path, echo: Callable[[str], None] = print, *,
+                    progress: bool = True) -> list[Path]:
+    """Solve the job's image and write its folder; returns the files (manifest last);
+    ``progress``: a bar of the load cases' residual decades.
 
     ``out`` must be claimed for ``itr solve`` (or free: it is claimed here).
     """
@@ -215,9 +235,10 @@ def run_image_solve(job: ImageJob, out: Path, echo: Callable[[str], None] = prin
     ms = job.microstructure
     summary = image_summary(job)
     backend = job.solver.backend(voxels=math.prod(ms.shape))
-    with warnings.catch_warnings(record=True) as caught:
+    bar, callback = residual_bar(job.tol, progress=progress)
+    with bar, warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        res = homogenize(ms, job.materials, solver=backend, tol=job.tol)
+        res = homogenize(ms, job.materials, solver=backend, tol=job.tol, callback=callback)
     notes = _notes(caught, ms)
     for line in _tensor_lines(res, job.volume.axes) + _summary_lines(summary):
         echo(line)
