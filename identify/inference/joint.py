@@ -75,7 +75,7 @@ from .priors import ModelFormPrior, ResistancePrior
 __all__ = ["Tabulated", "JointSpace", "JointLikelihood", "JointPosterior", "sample", "refine",
            "marginal_of", "with_marginals",
            "weighted_quantile", "density_data", "DENSITY_MODEL_SD",
-           "thickness_series",
+           "thickness_series", "system_means",
            "TABLE_POINTS_1D", "TABLE_POINTS_2D", "FRACTION_UNIT"]
 
 #: Grid points of a one-parameter forward model's table over its reduced basis's box.
@@ -397,14 +397,21 @@ class JointSpace:
         return cols
 
 
-def _groups(tables: Mapping[str, Tabulated]) -> dict[str, tuple[str, float]]:
-    """Per formulation its filler system and its total filler fraction about the system's
-    mean, in :data:`FRACTION_UNIT`."""
+def system_means(tables: Mapping[str, Tabulated]) -> dict[str, float]:
+    """Per filler system of ``tables`` its formulations' mean total filler fraction (the
+    model-form slope's centre)."""
     by: dict[str, list[float]] = {}
     for t in tables.values():
         by.setdefault(t.group, []).append(sum(t.fractions.values()))
-    return {f: (t.group, (sum(t.fractions.values()) - float(np.mean(by[t.group])))
-                / FRACTION_UNIT) for f, t in tables.items()}
+    return {g: float(np.mean(v)) for g, v in by.items()}
+
+
+def _groups(tables: Mapping[str, Tabulated]) -> dict[str, tuple[str, float]]:
+    """Per formulation its filler system and its total filler fraction about the system's
+    mean, in :data:`FRACTION_UNIT`."""
+    means = system_means(tables)
+    return {f: (t.group, (sum(t.fractions.values()) - means[t.group]) / FRACTION_UNIT)
+            for f, t in tables.items()}
 
 
 #: Relative sd of a predicted sample density given the stated phase densities (ideal mixing;

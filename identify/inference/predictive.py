@@ -33,7 +33,6 @@ back by :func:`read_record`.
 from __future__ import annotations
 
 import hashlib
-import json
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, replace
@@ -43,7 +42,7 @@ from typing import Any
 import numpy as np
 
 from .effect_terms import JointEffect
-from .joint import FRACTION_UNIT, JointLikelihood, JointSpace, Tabulated
+from .joint import FRACTION_UNIT, JointLikelihood, JointSpace, Tabulated, system_means
 
 __all__ = ["PredictiveRecord", "Prediction", "record_of", "write_record", "read_record",
            "predict", "model_draws", "measured_draws", "with_draws", "formulation_sd",
@@ -104,6 +103,11 @@ class PredictiveRecord:
     measured: tuple[str, ...] = ()
     formulation_sd: float = 0.0
 
+    @property
+    def resistances(self) -> list[str]:
+        """The flat names of the resistances the identification sampled."""
+        return _resistances(self.space["names"])
+
     def to_dict(self, draws_file: str, draws_sha256: str) -> dict[str, Any]:
         """The JSON block (the draws in ``draws_file``)."""
         return {"format": RECORD_FORMAT, "parametrisation": self.parametrisation,
@@ -113,6 +117,10 @@ class PredictiveRecord:
                 "quoted": self.quoted, "settings": self.settings, "effect": self.effect,
                 "measured": list(self.measured), "draws_file": draws_file,
                 "draws_sha256": draws_sha256, "draws": int(self.draws.shape[0])}
+
+
+def _resistances(names) -> list[str]:
+    return [n[len("log10 "):] for n in names if n.startswith("log10 ")]
 
 
 def _replicate_sd(measurements) -> float:
@@ -139,31 +147,27 @@ def record_of(ident, *, draws: int = RECORD_DRAWS, joint=None,
                          "joint=True)")
     lik = likelihood if likelihood is not None else ident.likelihood()
     sp = lik.space
-    by: dict[str, list[float]] = {}
-    for t in lik.tables.values():
-        by.setdefault(t.group, []).append(sum(t.fractions.values()))
     rows = jp.counted_rows(draws, seed=jp.seed + 3)
     samples = np.asarray(jp.samples[rows], dtype=float)
     effect = sp.effect.key if sp.effect is not None else None
     quoted = dict(ident.quoted) if joint is None else {
-        n[len("log10 "):]: float(10 ** np.median(samples[:, i]))
-        for i, n in enumerate(sp.names) if n.startswith("log10 ")}
+        r: float(10 ** np.median(samples[:, sp.names.index(f"log10 {r}")]))
+        for r in _resistances(sp.names)}
     from ..forward.fidelity import fidelity_name
 
     settings = {**ident.settings.to_dict(), "fidelity": fidelity_name(ident.settings.faithful)}
     if sp.effect is not None:
         settings["effect_reference_fraction"] = sp.effect.reference_fraction
-    n_r = sum(n.startswith("log10 ") for n in sp.names)
     return PredictiveRecord(
         ident.parametrisation,
         {"names": list(sp.names), "kinds": list(sp.kinds), "a": list(sp.a), "b": list(sp.b),
          "held": dict(sp.held), "matrix": sp.matrix},
-        {g: float(np.mean(v)) for g, v in by.items()},
+        system_means(lik.tables),
         {g: float(s) for g, s in lik.scatter.items()},
         _replicate_sd(ident.measurements), quoted, settings, samples, effect,
         tuple(ident.measurements.formulations),
         formulation_sd(lik, samples[:: max(1, samples.shape[0] // MISFIT_DRAWS)],
-                       fitted=n_r))
+                       fitted=len(_resistances(sp.names))))
 
 
 #: Posterior draws over which :func:`formulation_sd` averages the model's k and variance.
@@ -240,17 +244,9 @@ def read_record(path: str | Path, parametrisation: str | None = None, *,
 
 
 def _identified(path: Path) -> dict:
-    try:
-        data = json.loads(path.read_text())
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ValueError(f"identified: cannot read {path}: {exc}") from None
-    except json.JSONDecodeError as exc:
-        raise ValueError(f"identified: {path} is not JSON ({exc.msg}, line {exc.lineno})"
-                         ) from None
-    if not isinstance(data, dict) or "headline" not in data:
-        raise ValueError(f"identified: {path} is not an identified.json of itr identify or "
-                         "itr reproduce")
-    return data
+    from itr_fv.materials.resistance_sources import read_identified
+
+    return read_identified(path, argument="identified")
 
 
 def _block(data: dict, parametrisation: str | None, *, effect: bool, path: Path) -> dict:
@@ -361,9 +357,8 @@ def _checked(record: PredictiveRecord, tables: Mapping[str, Tabulated], replicat
         raise ValueError(f"replicates: expected a whole number >= 1, got {replicates!r}")
     if level is not None and not 0 < level < 1:
         raise ValueError(f"level: expected a value in (0, 1), got {level!r}")
-    known = {n.split(" ", 1)[1] for n in record.space["names"] if n.startswith("log10 ")}
     for f, t in tables.items():
-        missing = [p for p in t.parameters if p not in known]
+        missing = [p for p in t.parameters if p not in record.resistances]
         if missing:
             raise ValueError(f"formulations: {f} needs {', '.join(missing)}, which the "
                              "identification did not identify (measure a formulation of "

@@ -164,7 +164,6 @@ def check_names(names: Sequence[str], system: MaterialSystem, record: Predictive
     if not names:
         raise ValueError("formulations: name one formulation at least (e.g. Al2O3-60)")
     par = PARAMETRISATIONS[record.parametrisation]
-    known = {n.split(" ", 1)[1] for n in record.space["names"] if n.startswith("log10 ")}
     out = []
     for n in names:
         try:
@@ -174,7 +173,7 @@ def check_names(names: Sequence[str], system: MaterialSystem, record: Predictive
         if n in out:
             raise ValueError(f"formulations: {n} named twice")
         missing = [p for p in par.parameters(sorted(fractions), matrix=system.matrix)
-                   if p not in known]
+                   if p not in record.resistances]
         if missing:
             raise ValueError(f"formulations: {n} needs {', '.join(missing)}, which the "
                              f"identification (of {', '.join(record.measured)}) did not "

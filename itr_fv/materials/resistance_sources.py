@@ -20,7 +20,7 @@ from pathlib import Path
 from .parameters import parse_parameter
 
 __all__ = ["parse_resistance", "resistances_from_identified", "resistances_from_system",
-           "merge_resistances", "pair_of", "PRECEDENCE"]
+           "merge_resistances", "pair_of", "PRECEDENCE", "read_identified"]
 
 #: Sources from the strongest to the weakest: a pair given by several takes the first's.
 PRECEDENCE = ("command line", "identified", "system file")
@@ -88,6 +88,26 @@ def parse_resistance(text: str, phases: Sequence[str], matrix: str, *,
     return pair, _value(value.strip(), key, argument)  # type: ignore[return-value]
 
 
+def read_identified(path: str | os.PathLike, *, argument: str) -> dict:
+    """An ``identified.json`` of ``itr identify``/``reproduce`` as a dict, its headline of
+    identified parameters checked; ValueError naming ``argument`` for a missing or
+    unreadable file, one that is not JSON or one without that headline."""
+    p = Path(path)
+    try:
+        data = json.loads(p.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise ValueError(f"{argument}: no such file {str(p)!r}") from None
+    except (json.JSONDecodeError, UnicodeDecodeError, IsADirectoryError) as exc:
+        raise ValueError(f"{argument}: {str(p)!r} is not JSON ({exc})") from None
+    except OSError as exc:
+        raise ValueError(f"{argument}: cannot read {str(p)!r} ({exc})") from None
+    head = data.get("headline") if isinstance(data, dict) else None
+    if not isinstance(head, dict) or not isinstance(head.get("parameters"), dict):
+        raise ValueError(f"{argument}: {str(p)!r} has no headline of identified parameters "
+                         "(an itr identify or itr reproduce identified.json)")
+    return data
+
+
 def resistances_from_identified(path: str | os.PathLike, *, parametrisation: str | None = None,
                                 argument: str = "resistances"
                                 ) -> tuple[dict[str, float], str, list[str]]:
@@ -111,16 +131,7 @@ def resistances_from_identified(path: str | os.PathLike, *, parametrisation: str
         parametrisation.
     """
     p = Path(path)
-    try:
-        data = json.loads(p.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise ValueError(f"{argument}: no such file {str(p)!r}") from None
-    except (json.JSONDecodeError, UnicodeDecodeError, IsADirectoryError) as exc:
-        raise ValueError(f"{argument}: {str(p)!r} is not JSON ({exc})") from None
-    head = data.get("headline") if isinstance(data, dict) else None
-    if not isinstance(head, dict) or not isinstance(head.get("parameters"), dict):
-        raise ValueError(f"{argument}: {str(p)!r} has no headline of identified parameters "
-                         "(an itr identify or itr reproduce identified.json)")
+    head = read_identified(p, argument=argument)["headline"]
     chosen = parametrisation or head.get("quote")
     table = head["parameters"].get(chosen)
     if not isinstance(table, dict):
